@@ -1,0 +1,1 @@
+"""Built-in labelling rules, installed as ``sc2data.rules``."""

@@ -1,0 +1,49 @@
+"""The ``sc2data`` command line: a thin layer that parses options and calls the library."""
+
+from __future__ import annotations
+
+import sys
+
+import click
+import typer
+
+from sc2data.errors import Sc2DataError
+
+app = typer.Typer(
+    name="sc2data",
+    help="Natural-language commands grounded in StarCraft II BuildMarines game states.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    rich_markup_mode=None,
+)
+
+
+@app.command()
+def version() -> None:
+    """Print the versions of sc2data and the packages its data records."""
+    from sc2data.provenance import versions
+
+    for name, v in versions().items():
+        typer.echo(f"{name} {v}")
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Console entry point: user errors become one line on stderr and exit status 2."""
+    command = typer.main.get_command(app)
+    try:
+        command.main(args=argv, prog_name="sc2data", standalone_mode=False)
+    except click.exceptions.Exit as e:
+        sys.exit(e.exit_code)
+    except click.exceptions.Abort:
+        typer.echo("sc2data: interrupted", err=True)
+        sys.exit(130)
+    except click.ClickException as e:
+        typer.echo(f"sc2data: error: {e.format_message()}", err=True)
+        sys.exit(e.exit_code)
+    except Sc2DataError as e:
+        typer.echo(f"sc2data: error: {e}", err=True)
+        sys.exit(2)
+    except KeyboardInterrupt:
+        typer.echo("sc2data: interrupted; rerun the same command to resume", err=True)
+        sys.exit(130)

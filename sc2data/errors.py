@@ -1,0 +1,20 @@
+"""The one exception type the CLI turns into a one-line message and a non-zero exit."""
+
+from __future__ import annotations
+
+
+class Sc2DataError(Exception):
+    """Bad input or environment: the message says what is wrong and what to do.
+
+    Library code raises it (or a subclass) for anything a user can fix: a wrong option, a
+    malformed recipe, a foreign or damaged shard, a missing install. The CLI prints
+    ``sc2data: error: <message>`` and exits with status 2, with no traceback.
+    """
+
+
+class MissingDependencyError(Sc2DataError):
+    """An optional package is not installed; the message names the extra to install."""
+
+    def __init__(self, package: str, extra: str, purpose: str) -> None:
+        super().__init__(f"{purpose} needs the optional package {package!r}; install it with "
+                         f"pip install 'sc2data[{extra}]'")

@@ -1,0 +1,242 @@
+"""The state schema, described once as data.
+
+A *frame* is one pysc2 observation reduced to what we keep: some screen layers, some minimap
+layers and the non-spatial vectors. A *stack* is two consecutive frames (previous, current), the
+paper's temporal stack of n=2. Everything that stores, reads, labels or learns from frames derives
+its layout from a :class:`Schema`: the HDF5 writer and reader, ``sc2data info``, the rules'
+requirements and the model's input channels.
+
+Layers come from pysc2's own tables (``features.SCREEN_FEATURES`` / ``MINIMAP_FEATURES``), so
+names, indices, scales and kinds are pysc2's; each layer is kept in the smallest unsigned integer
+dtype its scale allows, losslessly.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+
+from sc2data._pysc2 import features
+
+SCHEMA_VERSION = 1
+"""Bump when the stored layout changes; readers refuse shards of another version."""
+
+SCREEN_SIZE = 64
+MINIMAP_SIZE = 64
+
+Group = Literal["screen", "minimap"]
+
+PAPER_SCREEN: tuple[str, ...] = (
+    "height_map", "visibility_map", "creep", "power", "player_id", "player_relative",
+    "unit_type", "selected", "unit_hit_points", "unit_energy", "unit_shields", "unit_density",
+    "unit_density_aa",
+)
+"""pysc2 1.x's 13 screen layers: the paper's screen state (brief §5)."""
+
+PAPER_MINIMAP: tuple[str, ...] = (
+    "height_map", "visibility_map", "creep", "camera", "player_id", "player_relative", "selected",
+)
+"""pysc2 1.x's 7 minimap layers: the paper's minimap state."""
+
+_TABLES = {"screen": features.SCREEN_FEATURES, "minimap": features.MINIMAP_FEATURES}
+_OBS_KEY = {"screen": "feature_screen", "minimap": "feature_minimap"}
+
+
+@dataclass(frozen=True)
+class Layer:
+    """One spatial feature layer, as pysc2 defines it."""
+
+    group: Group
+    name: str
+    index: int
+    """Position in pysc2's ``feature_screen`` / ``feature_minimap`` array."""
+    scale: int
+    """Number of distinct values (pysc2's ``scale``); values lie in ``[0, scale)``."""
+    categorical: bool
+
+    @property
+    def key(self) -> str:
+        return f"{self.group}/{self.name}"
+
+    @property
+    def dtype(self) -> np.dtype:
+        """Smallest lossless unsigned dtype for this layer's scale."""
+        return np.dtype(np.uint8) if self.scale <= 256 else np.dtype(np.uint16)
+
+
+def layer(group: Group, name: str) -> Layer:
+    """Look a layer up in pysc2's table by group and name."""
+    table = _TABLES[group]
+    try:
+        f = getattr(table, name)
+    except AttributeError:
+        known = ", ".join(f.name for f in table)
+        raise ValueError(f"unknown {group} layer {name!r}; pysc2 has: {known}") from None
+    return Layer(group, f.name, int(f.index), int(f.scale),
+                 f.type == features.FeatureType.CATEGORICAL)
+
+
+@dataclass(frozen=True)
+class Vector:
+    """One non-spatial observation vector kept per frame."""
+
+    name: str
+    fields: tuple[str, ...]
+    dtype: np.dtype = np.dtype(np.int32)
+
+    @property
+    def size(self) -> int:
+        return len(self.fields)
+
+
+VECTORS: tuple[Vector, ...] = (
+    Vector("player", tuple(f.name for f in features.Player)),
+    Vector("score_cumulative", tuple(f.name for f in features.ScoreCumulative)),
+    Vector("game_loop", ("game_loop",)),
+)
+"""Non-spatial vectors, by pysc2's field names. ``player`` (11) plus ``score_cumulative`` (13) is
+our reading of the paper's "13 non-spatial features" gap: we keep both, whole."""
+
+
+@dataclass(frozen=True)
+class Schema:
+    """Which layers and vectors a dataset keeps, in which order."""
+
+    screen: tuple[Layer, ...]
+    minimap: tuple[Layer, ...]
+    vectors: tuple[Vector, ...] = VECTORS
+    screen_size: int = SCREEN_SIZE
+    minimap_size: int = MINIMAP_SIZE
+    version: int = SCHEMA_VERSION
+
+    @classmethod
+    def from_names(cls, screen: Iterable[str], minimap: Iterable[str]) -> Schema:
+        return cls(tuple(layer("screen", n) for n in screen),
+                   tuple(layer("minimap", n) for n in minimap))
+
+    @classmethod
+    def paper(cls) -> Schema:
+        """The paper's 13 screen + 7 minimap layers (the default)."""
+        return cls.from_names(PAPER_SCREEN, PAPER_MINIMAP)
+
+    @classmethod
+    def full(cls) -> Schema:
+        """All 27 screen + 11 minimap layers of pysc2 4.0."""
+        return cls.from_names((f.name for f in features.SCREEN_FEATURES),
+                              (f.name for f in features.MINIMAP_FEATURES))
+
+    @classmethod
+    def named(cls, name: str) -> Schema:
+        """A preset by name: ``paper`` or ``full``."""
+        presets = {"paper": cls.paper, "full": cls.full}
+        if name not in presets:
+            raise ValueError(f"unknown layer set {name!r}; choose one of: {', '.join(presets)}")
+        return presets[name]()
+
+    @property
+    def layers(self) -> tuple[Layer, ...]:
+        return self.screen + self.minimap
+
+    def group(self, group: Group) -> tuple[Layer, ...]:
+        return self.screen if group == "screen" else self.minimap
+
+    def size(self, group: Group) -> int:
+        return self.screen_size if group == "screen" else self.minimap_size
+
+    def keys(self) -> tuple[str, ...]:
+        """Every array key a frame carries: ``screen/<layer>``, ``minimap/<layer>``, vectors."""
+        return tuple(l.key for l in self.layers) + tuple(v.name for v in self.vectors)
+
+    def frame_bytes(self) -> int:
+        """Uncompressed bytes of one frame."""
+        spatial = sum(l.dtype.itemsize * self.size(l.group) ** 2 for l in self.layers)
+        return spatial + sum(v.dtype.itemsize * v.size for v in self.vectors)
+
+    def extract(self, obs: Mapping[str, Any]) -> dict[str, np.ndarray]:
+        """Reduce one pysc2 observation to this schema's arrays (lossless, range-checked)."""
+        out: dict[str, np.ndarray] = {}
+        for group in ("screen", "minimap"):
+            planes = np.asarray(obs[_OBS_KEY[group]])
+            for l in self.group(group):
+                plane = planes[l.index]
+                if plane.size and (plane.min() < 0 or plane.max() >= l.scale):
+                    raise ValueError(f"{l.key} holds values outside [0, {l.scale})")
+                out[l.key] = plane.astype(l.dtype, copy=False)
+        for v in self.vectors:
+            out[v.name] = np.asarray(obs[v.name]).astype(v.dtype, copy=False).reshape(v.size)
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able description, stored in every shard and manifest."""
+        return {
+            "version": self.version,
+            "screen": [l.name for l in self.screen],
+            "minimap": [l.name for l in self.minimap],
+            "vectors": {v.name: list(v.fields) for v in self.vectors},
+            "screen_size": self.screen_size,
+            "minimap_size": self.minimap_size,
+        }
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Schema:
+        """Inverse of :meth:`to_dict`; refuses another schema version."""
+        version = d.get("version")
+        if version != SCHEMA_VERSION:
+            raise SchemaError(f"schema version {version} is not the supported version "
+                              f"{SCHEMA_VERSION}; regenerate the data with this sc2data")
+        schema = cls.from_names(d["screen"], d["minimap"])
+        if d.get("vectors") != {v.name: list(v.fields) for v in schema.vectors}:
+            raise SchemaError("the stored non-spatial vectors differ from this pysc2's")
+        return schema
+
+
+class SchemaError(ValueError):
+    """Data whose schema this version of sc2data cannot read."""
+
+
+class MissingLayerError(KeyError):
+    """A stack batch lacks a layer or vector that a consumer (rule, model) needs."""
+
+    def __str__(self) -> str:  # KeyError quotes its argument; we want a plain sentence.
+        return str(self.args[0])
+
+
+class StackBatch:
+    """B two-frame stacks, read by pysc2 name: the contract between storage, rules and model.
+
+    ``arrays`` maps each key of a :class:`Schema` (``screen/unit_type``, ``player``, …) to an
+    array of shape ``(B, 2, …)``: index 0 along axis 1 is the previous frame, 1 the current one.
+    """
+
+    def __init__(self, arrays: Mapping[str, np.ndarray], schema: Schema) -> None:
+        self.arrays = dict(arrays)
+        self.schema = schema
+        sizes = {a.shape[0] for a in self.arrays.values()}
+        if len(sizes) > 1:
+            raise ValueError(f"stack arrays disagree on batch size: {sorted(sizes)}")
+        self.size = sizes.pop() if sizes else 0
+
+    def __len__(self) -> int:
+        return self.size
+
+    def __repr__(self) -> str:
+        return f"StackBatch(size={self.size}, keys={len(self.arrays)})"
+
+    def layer(self, key: str) -> np.ndarray:
+        """``(B, 2, H, W)`` array of ``screen/<name>`` or ``minimap/<name>``."""
+        try:
+            return self.arrays[key]
+        except KeyError:
+            raise MissingLayerError(f"the data has no layer {key!r} (stored: "
+                                    f"{', '.join(l.key for l in self.schema.layers)}); roll out "
+                                    f"again with a layer set that keeps it") from None
+
+    def vector(self, name: str, field: str) -> np.ndarray:
+        """``(B, 2)`` array of one field of a non-spatial vector, e.g. ``("player", "minerals")``."""
+        for v in self.schema.vectors:
+            if v.name == name and field in v.fields and name in self.arrays:
+                return self.arrays[name][:, :, v.fields.index(field)]
+        raise MissingLayerError(f"the data has no vector field {name}.{field}")

@@ -1,0 +1,1 @@
+"""The embedded BuildMarines simulator, speaking pysc2's environment interface."""

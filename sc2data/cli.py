@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import sys
 
-import click
 import typer
 
 from sc2data.errors import Sc2DataError
@@ -17,6 +16,11 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
     rich_markup_mode=None,
 )
+
+
+@app.callback()
+def _root() -> None:
+    """Natural-language commands grounded in StarCraft II BuildMarines game states."""
 
 
 @app.command()
@@ -33,14 +37,16 @@ def main(argv: list[str] | None = None) -> None:
     command = typer.main.get_command(app)
     try:
         command.main(args=argv, prog_name="sc2data", standalone_mode=False)
-    except click.exceptions.Exit as e:
+    except typer.Exit as e:
         sys.exit(e.exit_code)
-    except click.exceptions.Abort:
-        typer.echo("sc2data: interrupted", err=True)
+    except typer.Abort:
+        typer.echo("sc2data: interrupted; rerun the same command to resume", err=True)
         sys.exit(130)
-    except click.ClickException as e:
-        typer.echo(f"sc2data: error: {e.format_message()}", err=True)
-        sys.exit(e.exit_code)
+    except typer.TyperException as e:  # usage errors: unknown option, bad value, …
+        if type(e).__name__ == "NoArgsIsHelpError":
+            sys.exit(0)
+        typer.echo(f"sc2data: error: {e.format_message()}", err=True)  # type: ignore[attr-defined]
+        sys.exit(getattr(e, "exit_code", 2))
     except Sc2DataError as e:
         typer.echo(f"sc2data: error: {e}", err=True)
         sys.exit(2)

@@ -43,7 +43,8 @@ def main(argv: list[str] | None = None) -> None:
         typer.echo("sc2data: interrupted; rerun the same command to resume", err=True)
         sys.exit(130)
     except typer.TyperException as e:  # usage errors: unknown option, bad value, …
-        if type(e).__name__ == "NoArgsIsHelpError":
+        if type(e).__name__ == "NoArgsIsHelpError":  # bare `sc2data`: show the help
+            typer.echo(e.ctx.get_help())  # type: ignore[attr-defined]
             sys.exit(0)
         typer.echo(f"sc2data: error: {e.format_message()}", err=True)  # type: ignore[attr-defined]
         sys.exit(getattr(e, "exit_code", 2))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from sc2data.reward import load_model
 from sc2data.schema import Schema, StackBatch
 
-__all__ = ["Schema", "StackBatch"]
+__all__ = ["Schema", "StackBatch", "load_model"]

@@ -49,6 +49,7 @@ def train_cmd(
                                            "[default: GloVe 6B-50d]."),
     vocab_size: int = typer.Option(50_000, help="Words kept from the vectors."),
     categorical: str = typer.Option("embed", help="Categorical layers: embed, onehot, scalar."),
+    pool: int = typer.Option(2, help="Pool spatial layers p×p into cell shares (1 = off)."),
     threads: Optional[int] = typer.Option(None, help="torch CPU threads."),
     amp: bool = typer.Option(False, help="bfloat16 autocast on CUDA."),
     overwrite: bool = typer.Option(False, help="Reuse a non-empty run folder."),
@@ -60,7 +61,7 @@ def train_cmd(
     run = train(TrainConfig(
         data=str(data), out=str(out) if out else None, epochs=epochs, batch_size=batch_size,
         lr=lr, l2=l2, device=device, seed=seed, vectors=str(vectors) if vectors else None,
-        vocab_size=vocab_size, categorical=categorical, threads=threads, amp=amp,
+        vocab_size=vocab_size, categorical=categorical, pool=pool, threads=threads, amp=amp,
         overwrite=overwrite, progress=progress))
     typer.echo(f"run: {run}")
 

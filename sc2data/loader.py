@@ -148,7 +148,7 @@ class PairLoader:
 
     def __init__(self, packed: PackedSplit, state: np.ndarray, text: np.ndarray,
                  target: np.ndarray, batch_size: int, keys: Sequence[str], shuffle: bool,
-                 seed: int = 0, window: int = 8, prefetch: int = 2,
+                 seed: int = 0, window: int = 8, prefetch: int = 16,
                  transform: Callable[[dict[str, np.ndarray]], Any] | None = None) -> None:
         self.packed, self.keys, self.transform = packed, list(keys), transform
         self.state, self.text, self.target = state, text, target
@@ -195,8 +195,8 @@ class PairLoader:
 
 
 def _prefetch(it: Iterator[Batch], depth: int) -> Iterator[Batch]:
-    """Run ``it`` in a background thread, ``depth`` windows' worth of batches ahead."""
-    q: queue.Queue[Any] = queue.Queue(maxsize=depth * 64)
+    """Run ``it`` in a background thread, at most ``depth`` batches ahead."""
+    q: queue.Queue[Any] = queue.Queue(maxsize=depth)
     stop = threading.Event()
     done = object()
 

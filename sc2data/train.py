@@ -62,6 +62,8 @@ class TrainConfig:
     """Most frequent words kept from the vectors (paper: 50k), plus the commands' words."""
     categorical: str = "embed"
     """Categorical layers: ``embed``, ``onehot`` or ``scalar`` (see sc2data.model)."""
+    pool: int = 2
+    """Spatial layers enter as p×p cell shares (1 = full resolution; see sc2data.model)."""
     window: int = 8
     """Packed blocks (256 stacks each) decoded and shuffled together by the loader."""
     overwrite: bool = False
@@ -83,8 +85,8 @@ def train(cfg: TrainConfig) -> Path:
 
     if cfg.categorical not in ("embed", "onehot", "scalar"):
         raise Sc2DataError(f"--categorical {cfg.categorical!r}: choose embed, onehot or scalar")
-    if cfg.epochs < 1 or cfg.batch_size < 1 or cfg.lr <= 0:
-        raise Sc2DataError("--epochs, --batch-size and --lr must be positive")
+    if cfg.epochs < 1 or cfg.batch_size < 1 or cfg.lr <= 0 or cfg.pool < 1:
+        raise Sc2DataError("--epochs, --batch-size, --lr and --pool must be positive")
     data = PairSet(cfg.data)
     cfg.name = f"{data.recipe_name}__{cfg.seed}__{time.strftime('%Y%m%d-%H%M%S')}"
     run = _prepare_run(Path(cfg.out or Path("runs") / cfg.name), cfg.overwrite)
@@ -110,7 +112,8 @@ def train(cfg: TrainConfig) -> Path:
 
     # --- model: input channels and categorical tables from the data's schema
     train_split, val_split = data.packed("train"), data.packed("val")
-    mcfg = M.ModelConfig(categorical=cfg.categorical)  # type: ignore[arg-type]
+    mcfg = M.ModelConfig(categorical=cfg.categorical, pool=cfg.pool,  # type: ignore[arg-type]
+                         conv=((16, 4, 2), (32, 3, 2)) if cfg.pool > 1 else ((16, 8, 4), (32, 4, 2)))
     big = [l.key for l in data.schema.layers if l.categorical and l.scale > mcfg.max_table]
     tables = M.value_tables(data.schema, (b for _, b in train_split.blocks(keys=big)) if big
                             else [], mcfg.max_table)

@@ -79,15 +79,13 @@ class WordVectors:
         index = self.index
         rows: list[list[int]] = []
         for text in texts:
-            known = []
-            for t in tokens(text):
-                if t in index:
-                    known.append(index[t])
-                else:
-                    _warn_unknown(t, text)
+            known = [index[t] for t in tokens(text) if t in index]
             if not known:
                 raise Sc2DataError(f"the command {text!r} has no word in the model's vocabulary "
                                    f"({len(self.words)} words from {self.source}); rephrase it")
+            for t in tokens(text):
+                if t not in index:
+                    _warn_unknown(t, text)
             rows.append(known)
         width = max((len(r) for r in rows), default=1)
         ids = np.zeros((len(rows), width), dtype=np.int64)
@@ -124,19 +122,16 @@ def _select(words: Sequence[str], matrix: np.ndarray, vocab_size: int, extra: Se
     """The first ``vocab_size`` distinct alphabetic lower-cased words, plus ``extra`` if found."""
     chosen: list[int] = []
     seen: set[str] = set()
-    first: dict[str, int] = {}
+    wanted = set(extra)
     for i, w in enumerate(words):
         lw = w.lower()
-        if lw in first or not _TOKEN.fullmatch(lw):
+        if lw in seen or not _TOKEN.fullmatch(lw):
             continue
-        first[lw] = i
-        if len(chosen) < vocab_size:
+        if len(chosen) < vocab_size or lw in wanted:
             chosen.append(i)
             seen.add(lw)
-    for w in extra:
-        if w not in seen and w in first:
-            chosen.append(first[w])
-            seen.add(w)
+        if len(chosen) >= vocab_size and wanted <= seen:
+            break
     if not chosen:
         raise Sc2DataError(f"word vectors {source}: no alphabetic word found; is it a vector file?")
     vectors = np.asarray(matrix[np.array(chosen)], dtype=np.float32)

@@ -115,6 +115,8 @@ def load_model(run: str | os.PathLike[str], device: str = "cpu") -> MEMScorer:
     from sc2data.model import load_checkpoint, resolve_device
 
     path = Path(run)
+    if not path.exists():
+        raise Sc2DataError(f"run folder {path} does not exist; pass the --out of sc2data train")
     if path.is_dir():
         path = path / "best.pt"
     dev = resolve_device(device)

@@ -89,7 +89,6 @@ def train(cfg: TrainConfig) -> Path:
         raise Sc2DataError("--epochs, --batch-size, --lr and --pool must be positive")
     data = PairSet(cfg.data)
     cfg.name = f"{data.recipe_name}__{cfg.seed}__{time.strftime('%Y%m%d-%H%M%S')}"
-    run = _prepare_run(Path(cfg.out or Path("runs") / cfg.name), cfg.overwrite)
 
     # --- seeding and device, in one place
     random.seed(cfg.seed)
@@ -112,6 +111,7 @@ def train(cfg: TrainConfig) -> Path:
 
     # --- model: input channels and categorical tables from the data's schema
     train_split, val_split = data.packed("train"), data.packed("val")
+    run = _prepare_run(Path(cfg.out or Path("runs") / cfg.name), cfg.overwrite)
     mcfg = M.ModelConfig(categorical=cfg.categorical, pool=cfg.pool,  # type: ignore[arg-type]
                          conv=((16, 4, 2), (32, 3, 2)) if cfg.pool > 1 else ((16, 8, 4), (32, 4, 2)))
     big = [l.key for l in data.schema.layers if l.categorical and l.scale > mcfg.max_table]

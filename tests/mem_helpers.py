@@ -24,7 +24,7 @@ def tiny_pairset(path: Path, schema: Schema | None = None, **kw: object) -> Path
 def train_tiny(data: Path, out: Path, epochs: int = 2, **kw: object) -> Path:
     from sc2data.train import TrainConfig, train
 
-    args: dict[str, object] = dict(threads=2, progress=False, vocab_size=2000)
+    args: dict[str, object] = dict(threads=1, progress=False, vocab_size=2000)
     args.update(kw)
     return train(TrainConfig(data=str(data), out=str(out), epochs=epochs, **args))  # type: ignore
 

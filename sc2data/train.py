@@ -170,17 +170,19 @@ def train(cfg: TrainConfig) -> Path:
                                 pairs_s=f"{sums[2] / (time.perf_counter() - t0):.0f}")
             seconds = time.perf_counter() - t0
             model.eval()
-            vsums = np.zeros(3)
+            vsums, v0 = np.zeros(3), time.perf_counter()
             with torch.no_grad():
                 for batch in val_loader.epoch(0):
                     vsums += step(batch, False)
+            val_seconds = time.perf_counter() - v0
             with torch.no_grad():
                 l2 = float(model.l2())
             val_loss = float(vsums[0] / vsums[2]) if vsums[2] else float("nan")
             row = {"epoch": epoch, "train_loss": float(sums[0] / sums[2]),
                    "train_acc": float(sums[1] / sums[2]), "l2": l2, "val_loss": val_loss,
                    "val_acc": float(vsums[1] / vsums[2]) if vsums[2] else float("nan"),
-                   "pairs_per_s": float(sums[2] / seconds), "seconds": seconds}
+                   "pairs_per_s": float(sums[2] / seconds), "seconds": seconds,
+                   "val_seconds": val_seconds}
             # without validation pairs, the last epoch is kept
             row["best"] = bool(val_loss < best) if vsums[2] else True
             if row["best"]:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import sys
+from pathlib import Path
+from typing import Optional
 
 import typer
 
@@ -30,6 +32,54 @@ def version() -> None:
 
     for name, v in versions().items():
         typer.echo(f"{name} {v}")
+
+
+@app.command()
+def rollout(
+    out: Path = typer.Option(..., "--out", help="Dataset folder (created; rerun to resume)."),
+    env: str = typer.Option("sim", help="Backend: sim (embedded simulator) or sc2 (real game)."),
+    agent: str = typer.Option("reduced-random", help="Agent: reduced-random, random or scripted."),
+    episodes: int = typer.Option(1, help="Episodes to play."),
+    workers: int = typer.Option(1, help="Worker processes (the data does not depend on it)."),
+    seed: int = typer.Option(0, help="Root seed; episode e is seeded from (seed, e)."),
+    layers: str = typer.Option("paper", help="Layer set: paper (13+7) or full (27+11)."),
+    episodes_per_shard: int = typer.Option(8, help="Episodes per shard file."),
+    max_steps: Optional[int] = typer.Option(None, help="Cut episodes after this many steps."),
+    progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",
+                                            help="Progress bar (default: on a terminal)."),
+) -> None:
+    """Play episodes and store every 2-frame stack in sharded, checksummed HDF5."""
+    from sc2data.rollout import RolloutConfig
+    from sc2data.rollout import rollout as run
+
+    config = RolloutConfig(env=env, agent=agent, episodes=episodes, seed=seed, layers=layers,
+                           episodes_per_shard=episodes_per_shard, max_steps=max_steps)
+    s = run(config, out, workers=workers, progress=progress)
+    typer.echo(f"{s.out}: {s.episodes} episodes, {s.steps:,} stacks in {s.seconds:.1f} s "
+               f"({s.shards_written} shards written, {s.shards_kept} kept)")
+
+
+@app.command()
+def info(folder: Path = typer.Argument(..., help="Dataset folder.")) -> None:
+    """Episodes, frames, bytes, the schema and per-shard figures of a dataset."""
+    from sc2data.audit import info as report
+
+    for line in report(folder):
+        typer.echo(line)
+
+
+@app.command()
+def verify(folder: Path = typer.Argument(..., help="Dataset folder.")) -> None:
+    """Check every checksum, sha256, schema and the index; exit 1 on any fault."""
+    from sc2data.audit import verify as check
+
+    faults = check(folder)
+    for fault in faults:
+        typer.echo(f"FAULT {fault}", err=True)
+    if faults:
+        typer.echo(f"sc2data: {folder}: {len(faults)} fault(s)", err=True)
+        raise typer.Exit(1)
+    typer.echo(f"{folder}: OK")
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -91,24 +91,27 @@ class ChunkEncoder:
 
 
 class ChunkDecoder:
-    """Verifies and decompresses raw chunks read with ``read_direct_chunk``."""
+    """Verifies and decompresses raw chunk payloads as stored on disk."""
 
     def __init__(self) -> None:
         self._zstd = zstandard.ZstdDecompressor()
 
-    def decode(self, raws: Sequence[bytes], masks: Sequence[int], dtype: np.dtype,
-               shape: tuple[int, ...], where: str) -> list[np.ndarray]:
-        """Chunks as ``shape`` arrays; a checksum mismatch raises :class:`ChecksumError`."""
+    def decode(self, raws: Sequence[bytes], masks: Sequence[int], size: int,
+               where: str) -> list[bytes]:
+        """Each chunk's ``size`` decoded bytes; a checksum mismatch raises ChecksumError."""
         payloads = [memoryview(r)[:-4] for r in raws]
-        stored = np.fromiter((int.from_bytes(r[-4:], "little") for r in raws), np.uint32, len(raws))
+        stored = np.frombuffer(b"".join(r[-4:] for r in raws), "<u4")
         bad = np.flatnonzero(fletcher32(payloads) != stored)
         if bad.size:
             raise ChecksumError(f"{where}: fletcher32 checksum mismatch in {bad.size} chunk(s); "
                                 f"the file is damaged")
-        out = []
-        for p, mask in zip(payloads, masks, strict=True):
-            data = bytes(p) if mask & 1 else self._zstd.decompress(p)
-            out.append(np.frombuffer(data, dtype).reshape(shape))
+        try:
+            out = [bytes(p) if m & 1 else self._zstd.decompress(p, max_output_size=size)
+                   for p, m in zip(payloads, masks, strict=True)]
+        except zstandard.ZstdError as e:
+            raise ChecksumError(f"{where}: a chunk does not decompress ({e})") from None
+        if any(len(d) != size for d in out):
+            raise ChecksumError(f"{where}: a chunk decodes to the wrong size; the file is damaged")
         return out
 
 

@@ -110,27 +110,27 @@ def manifest_schema(manifest: dict[str, Any], where: Path) -> Schema:
 
 
 class _ChunkCache:
-    """Decoded chunks, least recently used first out, bounded in bytes."""
+    """Decoded chunks (immutable bytes), least recently used out first, bounded in bytes."""
 
     def __init__(self, max_bytes: int) -> None:
         self.max_bytes = max_bytes
         self.bytes = 0
-        self._items: OrderedDict[tuple[int, str, int], np.ndarray] = OrderedDict()
+        self._items: OrderedDict[tuple[int, str, int], bytes] = OrderedDict()
 
-    def get(self, key: tuple[int, str, int]) -> np.ndarray | None:
+    def get(self, key: tuple[int, str, int]) -> bytes | None:
         item = self._items.get(key)
         if item is not None:
             self._items.move_to_end(key)
         return item
 
-    def put(self, key: tuple[int, str, int], value: np.ndarray) -> None:
-        if value.nbytes > self.max_bytes or key in self._items:
+    def put(self, key: tuple[int, str, int], value: bytes) -> None:
+        if len(value) > self.max_bytes or key in self._items:
             return
         self._items[key] = value
-        self.bytes += value.nbytes
+        self.bytes += len(value)
         while self.bytes > self.max_bytes:
             _, old = self._items.popitem(last=False)
-            self.bytes -= old.nbytes
+            self.bytes -= len(old)
 
 
 class Dataset:
@@ -155,6 +155,9 @@ class Dataset:
         self._shard_of = np.searchsorted(np.asarray(self.shard_names, dtype=object), names)
         self._stack_offsets = np.concatenate([[0], np.cumsum(self.n_steps)])
         self._cache = _ChunkCache(cache_bytes)
+        self._frame_layout: dict[str, tuple[tuple[int, ...], np.dtype]] = {
+            l.key: ((self.schema.size(l.group),) * 2, l.dtype) for l in self.schema.layers}
+        self._frame_layout.update({v.name: ((v.size,), v.dtype) for v in self.schema.vectors})
         self._max_open = max_open
         self._open: OrderedDict[int, Shard] = OrderedDict()
         self._steps: dict[int, dict[str, np.ndarray]] = {}
@@ -218,19 +221,24 @@ class Dataset:
         return keys
 
     # -- reading ------------------------------------------------------------------------------
-    def _gather(self, si: int, key: str, frames: np.ndarray) -> np.ndarray:
-        """Rows ``frames`` of shard ``si``'s dataset ``key``, decoding each chunk once."""
+    def _gather(self, si: int, key: str, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(buffer, rows): ``buffer[rows]`` are frames ``frames`` of shard ``si``'s ``key``.
+
+        Each chunk is decoded once per call, or taken from the cache of decoded chunks.
+        """
         src = self._shard(si).frames(key)
         c = src.chunk_frames
         ids, inverse = np.unique(frames // c, return_inverse=True)
-        blocks: list[np.ndarray | None] = [self._cache.get((si, key, int(i))) for i in ids]
-        missing = [j for j, b in enumerate(blocks) if b is None]
+        cache = self._cache
+        datas: list[bytes | None] = [cache.get((si, key, i)) for i in ids.tolist()]
+        missing = [j for j, d in enumerate(datas) if d is None]
         if missing:
-            for j, block in zip(missing, src.read_chunks(ids[missing]), strict=True):
-                blocks[j] = block
-                self._cache.put((si, key, int(ids[j])), block)
-        buf = blocks[0] if len(blocks) == 1 else np.concatenate(blocks)  # type: ignore[arg-type]
-        return buf[inverse.reshape(-1) * c + frames % c]  # type: ignore[index]
+            for j, data in zip(missing, src.read_chunks(ids[missing]), strict=True):
+                datas[j] = data
+                cache.put((si, key, int(ids[j])), data)
+        buf = np.frombuffer(datas[0] if len(datas) == 1 else b"".join(datas),  # type: ignore[arg-type]
+                            src.dtype).reshape(-1, *src.frame_shape)
+        return buf, inverse.reshape(-1) * c + frames % c
 
     def read(self, episodes: Sequence[int] | np.ndarray, steps: Sequence[int] | np.ndarray,
              keys: Iterable[str] | None = None) -> StackBatch:
@@ -241,25 +249,24 @@ class Dataset:
             raise ValueError("episodes and steps must have the same length")
         keys = self._keys(keys)
         rows = self._rows(episodes, steps)
-        frames = self._frame_start[rows] + steps
+        first = self._frame_start[rows] + steps
         shard_of = self._shard_of[rows]
-        layers = {l.key: l for l in self.schema.layers}
-        vectors = {v.name: v for v in self.schema.vectors}
+        shards = np.unique(shard_of)
         out: dict[str, np.ndarray] = {}
         for k in keys:
-            if k in layers:
-                side = self.schema.size(layers[k].group)
-                out[k] = np.empty((len(rows), 2, side, side), layers[k].dtype)
-            else:
-                out[k] = np.empty((len(rows), 2, vectors[k].size), vectors[k].dtype)
-        for si in np.unique(shard_of):
-            sel = np.flatnonzero(shard_of == si) if len(shard_of) else shard_of
-            f = frames[sel]
-            need = np.concatenate([f, f + 1])
+            shape, dtype = self._frame_layout[k]
+            out[k] = np.empty((len(rows), 2, *shape), dtype)
+        for si in shards.tolist():
+            sel = None if len(shards) == 1 else np.flatnonzero(shard_of == si)
+            f = first if sel is None else first[sel]
+            need = np.stack([f, f + 1], axis=1).reshape(-1)  # (previous, current) interleaved
             for k in keys:
-                got = self._gather(int(si), k, need)
-                out[k][sel, 0] = got[:len(f)]
-                out[k][sel, 1] = got[len(f):]
+                buf, at = self._gather(si, k, need)
+                flat = out[k].reshape(-1, *buf.shape[1:])
+                if sel is None:
+                    np.take(buf, at, axis=0, out=flat, mode="clip")
+                else:
+                    flat[np.stack([2 * sel, 2 * sel + 1], axis=1).reshape(-1)] = buf[at]
         return StackBatch(out, self.schema)
 
     def stack(self, episode: int, step: int, keys: Iterable[str] | None = None) -> StackBatch:

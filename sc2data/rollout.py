@@ -10,6 +10,9 @@ shards and finishes the rest; other settings in the same folder are refused.
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
+import fcntl
 import functools
 import multiprocessing as mp
 import os
@@ -17,7 +20,7 @@ import queue
 import random
 import signal
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -59,6 +62,8 @@ class RolloutConfig:
     """Episodes per shard file: bounds a shard to ~8 × 1,801 frames (≈15 MB at 1 KB/frame)."""
     max_steps: int | None = None
     """Cut episodes after this many steps (None: play to the end, 1,800 steps on BuildMarines)."""
+    step_mul: int = envs.STEP_MUL
+    """Game loops per agent step."""
     recipe: str | None = None
     """The recipe (``manifests/*.toml``) these settings came from, if any."""
     codec: Codec = field(default_factory=Codec)
@@ -76,6 +81,8 @@ class RolloutConfig:
             if getattr(self, name) < 1:
                 raise Sc2DataError(f"{name.replace('_', '-')} must be at least 1, "
                                    f"not {getattr(self, name)}")
+        if self.step_mul < 1:
+            raise Sc2DataError(f"step-mul must be at least 1, not {self.step_mul}")
         if self.max_steps is not None and self.max_steps < 1:
             raise Sc2DataError(f"max-steps must be at least 1, not {self.max_steps}")
         if not 0 <= self.seed < 2**63:
@@ -109,7 +116,11 @@ def episode_seeds(seed: int, episode: int) -> tuple[int, int]:
 
 
 def default_env_factory(config: RolloutConfig) -> EnvFactory:
-    return functools.partial(envs.make_env, config.env)
+    return functools.partial(_make_env, config.env, config.step_mul)
+
+
+def _make_env(backend: str, step_mul: int, seed: int) -> Any:
+    return envs.make_env(backend, seed=seed, step_mul=step_mul)
 
 
 def _make_agent(name: str, seed: int) -> Any:
@@ -209,8 +220,8 @@ def _differences(a: dict[str, Any], b: dict[str, Any]) -> list[str]:
     return sorted(k for k in set(a) | set(b) if a.get(k) != b.get(k))
 
 
-def prepare_folder(config: RolloutConfig, out: Path) -> list[int]:
-    """Check or create ``out``; drop stale partials; return the shards still to write."""
+def check_folder(config: RolloutConfig, out: Path) -> None:
+    """Refuse a file, a foreign folder, or a dataset made with other settings."""
     if out.exists() and not out.is_dir():
         raise Sc2DataError(f"output {out} exists and is not a folder; choose another --out")
     if out.is_dir() and (out / MANIFEST).exists():
@@ -219,16 +230,29 @@ def prepare_folder(config: RolloutConfig, out: Path) -> list[int]:
         if diff:
             raise Sc2DataError(f"{out} holds a dataset made with other settings (differs in: "
                                f"{', '.join(diff)}); use another --out or delete it")
-    elif out.is_dir() and any(out.iterdir()):
+    elif out.is_dir() and any(p.name != LOCK for p in out.iterdir()):
         raise Sc2DataError(f"output folder {out} is not empty and is not an sc2data dataset; "
                            f"choose an empty or new folder")
+
+
+def create_folder(out: Path) -> None:
+    """Make ``out`` (and its parents) and prove it writable; undo on failure."""
+    made = not out.exists()
     try:
         out.mkdir(parents=True, exist_ok=True)
         probe = out / f".write-test{PARTIAL}"
         probe.write_bytes(b"")
         probe.unlink()
     except OSError as e:
+        if made and out.is_dir():
+            with contextlib.suppress(OSError):
+                out.rmdir()
         raise Sc2DataError(f"cannot write to output folder {out}: {e.strerror or e}") from None
+
+
+def prepare_folder(config: RolloutConfig, out: Path) -> list[int]:
+    """Write the manifest if new; drop stale partials; check complete shards; return the rest."""
+    check_folder(config, out)  # again, under the lock
     if not (out / MANIFEST).exists():
         write_manifest(out, manifest_for(config))
     for stale in out.glob(f"*{PARTIAL}"):
@@ -250,11 +274,65 @@ def prepare_folder(config: RolloutConfig, out: Path) -> list[int]:
     return todo
 
 
+LOCK = ".lock"
+_LOCK_WAIT_S = 10.0
+
+
+class FolderLock:
+    """``flock`` on ``out/.lock``. A run holds it exclusively while it prepares the folder, then
+    shared, as its workers do; a second run waits for every process of the first (orphaned
+    workers of a killed run included) and refuses to write the folder alongside it."""
+
+    def __init__(self, out: Path, exclusive: bool) -> None:
+        self.out = out
+        self._fd = os.open(out / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            self._take(fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH)
+        except BaseException:
+            os.close(self._fd)
+            raise
+
+    def _take(self, mode: int) -> None:
+        deadline = time.monotonic() + _LOCK_WAIT_S
+        while True:
+            try:
+                fcntl.flock(self._fd, mode | fcntl.LOCK_NB)
+                return
+            except BlockingIOError:
+                if time.monotonic() > deadline:
+                    raise Sc2DataError(f"another sc2data rollout is writing to {self.out}; wait "
+                                       f"for it to finish or stop it") from None
+                time.sleep(0.05)
+
+    def share(self) -> None:
+        """Downgrade to a shared lock, so that this run's workers can take theirs."""
+        fcntl.flock(self._fd, fcntl.LOCK_SH)
+
+    def __enter__(self) -> FolderLock:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        os.close(self._fd)
+
+
+def _die_with_parent() -> None:
+    """Linux: have the kernel kill this worker when its parent dies (e.g. ``kill -9``)."""
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+
+
 # -- workers ------------------------------------------------------------------------------------
 def _worker(tasks: Any, results: Any, config: RolloutConfig, out: Path, env_factory: EnvFactory,
             agent_factory: AgentFactory) -> None:
     """A worker process: write shards from ``tasks`` until it gets ``None``."""
+    _die_with_parent()
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and stops us
+    with FolderLock(out, exclusive=False):
+        _work(tasks, results, config, out, env_factory, agent_factory)
+
+
+def _work(tasks: Any, results: Any, config: RolloutConfig, out: Path, env_factory: EnvFactory,
+          agent_factory: AgentFactory) -> None:
     while (i := tasks.get()) is not None:
         try:
             write_shard(config, out, i, env_factory, agent_factory,
@@ -275,7 +353,11 @@ def _progress(total: int, show: bool | None) -> Any:
 
 def _run_parallel(config: RolloutConfig, out: Path, todo: list[int], workers: int,
                   env_factory: EnvFactory, agent_factory: AgentFactory, bar: Any) -> None:
-    ctx = mp.get_context("forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn")
+    if "forkserver" in mp.get_all_start_methods():
+        ctx = mp.get_context("forkserver")
+        ctx.set_forkserver_preload([__name__])  # workers start without re-importing pysc2
+    else:
+        ctx = mp.get_context("spawn")
     tasks, results = ctx.Queue(), ctx.Queue()
     for i in todo:
         tasks.put(i)
@@ -349,18 +431,22 @@ def rollout(config: RolloutConfig, out: str | os.PathLike[str], workers: int = 1
         agent_factory = default_agent_factory(config)
     agent_factory(0)  # fail fast, before anything is written, on an agent that cannot be made
     started = time.perf_counter()
-    todo = prepare_folder(config, out)
-    per_episode = config.max_steps or envs.EPISODE_STEPS
-    total = sum(len(config.shard_episodes(i)) for i in todo) * per_episode
-    with _progress(total, progress) as bar:
-        if workers == 1 or len(todo) <= 1:
-            for i in todo:
-                write_shard(config, out, i, env_factory, agent_factory, bar.update)
-        else:
-            _run_parallel(config, out, todo, workers, env_factory, agent_factory, bar)
-        bar.total = bar.n
-        bar.refresh()
-    rows = [row for i in range(config.n_shards) for row in index_rows(out / shard_name(i))]
-    write_index(out, rows)
+    check_folder(config, out)
+    create_folder(out)
+    with FolderLock(out, exclusive=True) as lock:
+        todo = prepare_folder(config, out)
+        lock.share()
+        per_episode = config.max_steps or envs.EPISODE_STEPS
+        total = sum(len(config.shard_episodes(i)) for i in todo) * per_episode
+        with _progress(total, progress) as bar:
+            if workers == 1 or len(todo) <= 1:
+                for i in todo:
+                    write_shard(config, out, i, env_factory, agent_factory, bar.update)
+            else:
+                _run_parallel(config, out, todo, workers, env_factory, agent_factory, bar)
+            bar.total = bar.n
+            bar.refresh()
+        rows = [row for i in range(config.n_shards) for row in index_rows(out / shard_name(i))]
+        write_index(out, rows)
     return RolloutSummary(out, len(todo), config.n_shards - len(todo), len(rows),
                           sum(r["n_steps"] for r in rows), time.perf_counter() - started)

@@ -10,6 +10,7 @@ them through pysc2's ``environment.Base`` so the rollout loop runs on them uncha
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from typing import Any
 
@@ -183,3 +184,17 @@ class SyntheticEnv(environment.Base):
 
     def close(self) -> None:
         self._mock.close()
+
+
+def synthetic_env_factory(episode_steps: int = 64) -> functools.partial[SyntheticEnv]:
+    """A picklable ``seed -> SyntheticEnv`` factory for :func:`sc2data.rollout.rollout`."""
+    return functools.partial(SyntheticEnv, episode_steps=episode_steps)
+
+
+def pysc2_random_agent(seed: int) -> Any:
+    """pysc2's own uniform ``RandomAgent``, unchanged (it draws from the global numpy generator,
+    which the rollout seeds per episode)."""
+    from pysc2.agents.random_agent import RandomAgent
+
+    del seed
+    return RandomAgent()

@@ -37,23 +37,40 @@ def version() -> None:
 @app.command()
 def rollout(
     out: Path = typer.Option(..., "--out", help="Dataset folder (created; rerun to resume)."),
-    env: str = typer.Option("sim", help="Backend: sim (embedded simulator) or sc2 (real game)."),
-    agent: str = typer.Option("reduced-random", help="Agent: reduced-random, random or scripted."),
-    episodes: int = typer.Option(1, help="Episodes to play."),
+    env: Optional[str] = typer.Option(None, help="Backend: sim (embedded simulator, default) or "
+                                                 "sc2 (the real game)."),
+    agent: Optional[str] = typer.Option(None, help="Agent: reduced-random (default), random or "
+                                                   "scripted."),
+    episodes: Optional[int] = typer.Option(None, help="Episodes to play [default: 1]."),
+    seed: Optional[int] = typer.Option(None, help="Root seed; episode e is seeded from (seed, e) "
+                                                  "[default: 0]."),
+    layers: Optional[str] = typer.Option(None, help="Layer set: paper (13+7, default) or full "
+                                                    "(27+11)."),
+    recipe: Optional[Path] = typer.Option(None, help="Take the settings above from a recipe "
+                                                     "(manifests/*.toml)."),
     workers: int = typer.Option(1, help="Worker processes (the data does not depend on it)."),
-    seed: int = typer.Option(0, help="Root seed; episode e is seeded from (seed, e)."),
-    layers: str = typer.Option("paper", help="Layer set: paper (13+7) or full (27+11)."),
     episodes_per_shard: int = typer.Option(8, help="Episodes per shard file."),
     max_steps: Optional[int] = typer.Option(None, help="Cut episodes after this many steps."),
     progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",
                                             help="Progress bar (default: on a terminal)."),
 ) -> None:
     """Play episodes and store every 2-frame stack in sharded, checksummed HDF5."""
+    from sc2data.errors import Sc2DataError
     from sc2data.rollout import RolloutConfig
     from sc2data.rollout import rollout as run
 
-    config = RolloutConfig(env=env, agent=agent, episodes=episodes, seed=seed, layers=layers,
-                           episodes_per_shard=episodes_per_shard, max_steps=max_steps)
+    given = {k: v for k, v in {"env": env, "agent": agent, "episodes": episodes, "seed": seed,
+                               "layers": layers}.items() if v is not None}
+    extra = {"episodes_per_shard": episodes_per_shard, "max_steps": max_steps}
+    if recipe is not None:
+        from sc2data.recipe import load
+
+        if given:
+            raise Sc2DataError(f"--{next(iter(given))} conflicts with --recipe; change the "
+                               f"recipe instead")
+        config = RolloutConfig.from_recipe(load(recipe), **extra)
+    else:
+        config = RolloutConfig(**given, **extra)
     s = run(config, out, workers=workers, progress=progress)
     typer.echo(f"{s.out}: {s.episodes} episodes, {s.steps:,} stacks in {s.seconds:.1f} s "
                f"({s.shards_written} shards written, {s.shards_kept} kept)")

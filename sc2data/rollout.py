@@ -90,6 +90,13 @@ class RolloutConfig:
         if not (1 <= self.codec.chunk_frames <= 1024 and 1 <= self.codec.level <= 22):
             raise Sc2DataError(f"bad codec settings {self.codec}")
 
+    @classmethod
+    def from_recipe(cls, recipe: Any, **overrides: Any) -> RolloutConfig:
+        """The rollout settings of a parsed recipe (:func:`sc2data.recipe.load`)."""
+        r = recipe.rollout
+        return cls(env=r.env, agent=r.agent, episodes=r.episodes, seed=recipe.seed,
+                   layers=r.layers, step_mul=r.step_mul, recipe=recipe.name, **overrides)
+
     @property
     def schema(self) -> Schema:
         return Schema.named(self.layers)
@@ -323,20 +330,27 @@ def _die_with_parent() -> None:
 
 # -- workers ------------------------------------------------------------------------------------
 def _worker(tasks: Any, results: Any, config: RolloutConfig, out: Path, env_factory: EnvFactory,
-            agent_factory: AgentFactory) -> None:
+            agent_factory: AgentFactory, parent: int) -> None:
     """A worker process: write shards from ``tasks`` until it gets ``None``."""
     _die_with_parent()
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and stops us
+    if os.getppid() != parent:  # it died before we could ask to die with it
+        os._exit(1)
+
+    def report(n: int) -> None:
+        if os.getppid() != parent:  # orphaned where PR_SET_PDEATHSIG does not exist
+            os._exit(1)
+        results.put(("steps", n))
+
     with FolderLock(out, exclusive=False):
-        _work(tasks, results, config, out, env_factory, agent_factory)
+        _work(tasks, results, config, out, env_factory, agent_factory, report)
 
 
 def _work(tasks: Any, results: Any, config: RolloutConfig, out: Path, env_factory: EnvFactory,
-          agent_factory: AgentFactory) -> None:
+          agent_factory: AgentFactory, report: Callable[[int], None]) -> None:
     while (i := tasks.get()) is not None:
         try:
-            write_shard(config, out, i, env_factory, agent_factory,
-                        lambda n: results.put(("steps", n)))
+            write_shard(config, out, i, env_factory, agent_factory, report)
         except BaseException as e:  # noqa: BLE001 - reported to the parent, which fails
             results.put(("error", i, str(e) if isinstance(e, Sc2DataError)
                          else f"{type(e).__name__}: {e}"))
@@ -353,11 +367,9 @@ def _progress(total: int, show: bool | None) -> Any:
 
 def _run_parallel(config: RolloutConfig, out: Path, todo: list[int], workers: int,
                   env_factory: EnvFactory, agent_factory: AgentFactory, bar: Any) -> None:
-    if "forkserver" in mp.get_all_start_methods():
-        ctx = mp.get_context("forkserver")
-        ctx.set_forkserver_preload([__name__])  # workers start without re-importing pysc2
-    else:
-        ctx = mp.get_context("spawn")
+    # spawn, not forkserver: a forkserver's children are not ours, so they would outlive a
+    # ``kill -9`` of this process; spawned ones are, and die with it (_die_with_parent).
+    ctx = mp.get_context("spawn")
     tasks, results = ctx.Queue(), ctx.Queue()
     for i in todo:
         tasks.put(i)
@@ -365,7 +377,8 @@ def _run_parallel(config: RolloutConfig, out: Path, todo: list[int], workers: in
     for _ in range(n):
         tasks.put(None)
     procs = [ctx.Process(target=_worker, args=(tasks, results, config, out, env_factory,
-                                               agent_factory), daemon=True) for _ in range(n)]
+                                               agent_factory, os.getpid()), daemon=True)
+             for _ in range(n)]
     for p in procs:
         p.start()
     pending = set(todo)

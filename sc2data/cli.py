@@ -103,7 +103,9 @@ def main(argv: list[str] | None = None) -> None:
     """Console entry point: user errors become one line on stderr and exit status 2."""
     command = typer.main.get_command(app)
     try:
-        command.main(args=argv, prog_name="sc2data", standalone_mode=False)
+        rc = command.main(args=argv, prog_name="sc2data", standalone_mode=False)
+        if isinstance(rc, int) and rc:  # click returns typer.Exit(code) here, not raising it
+            sys.exit(rc)
     except typer.Exit as e:
         sys.exit(e.exit_code)
     except typer.Abort:

@@ -18,6 +18,7 @@ import multiprocessing as mp
 import os
 import queue
 import random
+import shutil
 import signal
 import time
 from collections.abc import Callable, Iterator
@@ -409,6 +410,18 @@ def _run_parallel(config: RolloutConfig, out: Path, todo: list[int], workers: in
                 stale.unlink(missing_ok=True)
 
 
+def _fail_fast(config: RolloutConfig, env_factory: EnvFactory,
+               agent_factory: AgentFactory) -> None:
+    """Make an agent (and a simulator) once here, so that a broken setup fails before any
+    worker starts; the real game is not launched for this (its check is ``sc2_available``)."""
+    try:
+        agent_factory(0)
+        if config.env == "sim":
+            env_factory(0).close()
+    except ImportError as e:
+        raise Sc2DataError(f"this sc2data install is incomplete ({e})") from None
+
+
 @dataclass(frozen=True)
 class RolloutSummary:
     """What a rollout call did."""
@@ -433,6 +446,7 @@ def rollout(config: RolloutConfig, out: str | os.PathLike[str], workers: int = 1
     config.validate()
     if workers < 1:
         raise Sc2DataError(f"workers must be at least 1, not {workers}")
+    check_folder(config, out)
     if env_factory is None:
         if config.env == "sc2" and not envs.sc2_available():
             envs.make_env("sc2")  # raises the one-line install hint
@@ -442,10 +456,15 @@ def rollout(config: RolloutConfig, out: str | os.PathLike[str], workers: int = 1
             raise Sc2DataError(f"unknown agent {config.agent!r}; choose one of: "
                                f"{', '.join(AGENTS)}")
         agent_factory = default_agent_factory(config)
-    agent_factory(0)  # fail fast, before anything is written, on an agent that cannot be made
     started = time.perf_counter()
-    check_folder(config, out)
+    made = not out.exists()
     create_folder(out)
+    try:
+        _fail_fast(config, env_factory, agent_factory)
+    except BaseException:
+        if made:
+            shutil.rmtree(out, ignore_errors=True)
+        raise
     with FolderLock(out, exclusive=True) as lock:
         todo = prepare_folder(config, out)
         lock.share()

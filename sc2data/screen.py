@@ -18,6 +18,8 @@ CAMERA_WIDTH = 24.0
 """World units across the feature screen (pysc2's default ``camera_width_world_units``)."""
 
 MINERAL_TYPES: tuple[int, ...] = tuple(int(u) for u in units.Neutral if "MineralField" in u.name)
+MOBILE_TYPES: tuple[int, ...] = (int(units.Terran.SCV), int(units.Terran.Marine))
+"""Our ground units: the game pushes them aside for a new building, so they never block one."""
 
 _S = features.SCREEN_FEATURES
 _SELF = features.PlayerRelative.SELF
@@ -69,12 +71,14 @@ class ScreenView:
         """Pixels where a ``size``×``size`` building can be centred on free, buildable ground.
 
         The footprint is widened by half a world unit for the game's snapping of the centre to its
-        grid; pixels off the screen count as blocked.
+        grid; pixels off the screen count as blocked, and so do structures and minerals, but not
+        our SCVs and marines, which the game pushes aside.
         """
         if size not in self._placements:
             r = (size / 2 + 0.5) * self.px_per_unit
             h = max(0, math.ceil(r - 0.5))
-            blocked = ~self.buildable | (self.unit_type != 0)
+            blocked = ~self.buildable | ((self.unit_type != 0)
+                                         & ~np.isin(self.unit_type, MOBILE_TYPES))
             self._placements[size] = _box_clear(blocked, h)
         return self._placements[size]
 

@@ -37,12 +37,12 @@ def _timestep(*, selected: int = 0, available: tuple[int, ...] = (0, 1, 2, 3, 4)
     ut[17:32, 16:31] = T.CommandCenter
     for y in (10, 16, 22, 28, 34):
         ut[y:y + 3, 4:10] = units.Neutral.MineralField
-    for x in (11, 14):
-        ut[20:22, x:x + 2] = T.SCV
+    for y, x in ((20, 11), (20, 14), (40, 40)):
+        ut[y:y + 2, x:x + 2] = T.SCV
     ut[5:13, 50:58] = T.Barracks
     pr[ut != 0] = features.PlayerRelative.SELF
     pr[np.isin(ut, [units.Neutral.MineralField])] = features.PlayerRelative.NEUTRAL
-    screen[_S.buildable.index][ut != 0] = 0
+    screen[_S.buildable.index][(ut != 0) & (ut != T.SCV)] = 0  # units stand on buildable ground
     player = np.zeros(11, np.int32)
     player[[_P.player_id, _P.minerals, _P.food_used, _P.food_cap, _P.food_workers,
             _P.idle_worker_count]] = [1, minerals, food[0], food[1], 12, idle]
@@ -92,15 +92,17 @@ def test_random_agent_is_reproducible_and_leaves_the_global_rng_alone() -> None:
 def test_screen_view_reads_units_selection_and_free_ground() -> None:
     v = ScreenView(_timestep(selected=T.SCV))
     assert v.selected_type() == T.SCV
-    assert len(v.blobs(v.own(T.SCV))) == 2 and len(v.blobs(v.minerals())) == 5
+    assert len(v.blobs(v.own(T.SCV))) == 3 and len(v.blobs(v.minerals())) == 5
     x, y = v.centre_pixel(v.own(T.CommandCenter))
     assert v.unit_type[y, x] == T.CommandCenter and abs(x - 23) <= 1 and abs(y - 24) <= 1
     depot, rax = v.placements(2), v.placements(3)
     assert depot.any() and rax.any() and not (rax & ~depot).any()
     ys, xs = np.nonzero(rax)
     for y, x in zip(ys, xs):  # a 3×3 building (8 px) centred there touches nothing
-        assert (v.unit_type[max(0, y - 4):y + 5, max(0, x - 4):x + 5] == 0).all()
+        assert np.isin(v.unit_type[max(0, y - 4):y + 5, max(0, x - 4):x + 5], [0, T.SCV]).all()
         assert v.buildable[max(0, y - 4):y + 5, max(0, x - 4):x + 5].all()
+    assert depot[40, 40], "SCVs are pushed aside, so they do not block a depot"
+    assert not depot[24, 23] and not depot[12, 8] and not depot[9, 54]
 
 
 def _macro_calls(agent: ReducedRandomAgent, macro: str, frames: list[Any]) -> list[Any]:

@@ -124,7 +124,8 @@ class BuildMarinesEnv(environment.Base):
         screen, minimap, top = self._renderer.draw(self._game)
         self._commands.top = top
         self._available = self._commands.available()
-        obs = obsdict.build(self._game, self._commands, screen, minimap, self._available)
+        obs = obsdict.build(self._game, self._commands, screen, minimap, self._available,
+                            self._renderer.hp, self._renderer.progress)
         return (environment.TimeStep(step_type=self._state, reward=reward,
                                      discount=discount, observation=obs),)
 

@@ -76,6 +76,11 @@ class Game:
         self.collected = 0
         self.spent = 0
         self.lost_value = 0
+        self.value_units = 0
+        self.value_structures = 0
+        self.value_by_category = [0, 0, 0, 0, 0]
+        """Mineral value of living units by pysc2 ``ScoreCategories`` (none, army, economy,
+        technology, upgrade)."""
         self.damage_dealt = 0.0
         self.idle_worker_time = 0.0
         self.idle_production_time = 0.0
@@ -109,11 +114,21 @@ class Game:
         u.t0 = u.t1 = t
         self.units[u.slot] = u
         self.table.add(u)
+        if owner == PLAYER_SELF:
+            self._value(u, +1)
         if u.data.structure:
             rows, cols = md.footprint_cells(x, y, u.data.footprint)
             self.occupied[rows, cols] = True
             self.grid_version += 1
         return u
+
+    def _value(self, u: Unit, sign: int) -> None:
+        v = sign * u.data.minerals
+        if u.data.structure:
+            self.value_structures += v
+        else:
+            self.value_units += v
+        self.value_by_category[category(u.utype)] += v
 
     # ------------------------------------------------------------------ time
 
@@ -591,13 +606,9 @@ class Game:
     def _spawn_spot(self, b: Unit, t: float) -> tuple[float, float]:
         """A free spot next to ``b``: rings around its footprint, south side first."""
         r = md.UNIT_DATA[md.MARINE].radius
-        tab = self.table
-        ground = np.flatnonzero(tab.alive & (tab.layer == 1))
+        ground = self.table.ground()
         if len(ground):
-            f = np.clip((t - tab.t0[ground]) / np.maximum(tab.t1[ground] - tab.t0[ground], 1e-9),
-                        0.0, 1.0)
-            gx = tab.x0[ground] + (tab.x1[ground] - tab.x0[ground]) * f
-            gy = tab.y0[ground] + (tab.y1[ground] - tab.y0[ground]) * f
+            gx, gy = self.table.positions(ground, t)
         x0, y0, x1, y1 = md.PLAYABLE
         for ring in range(12):
             half = max(b.data.footprint) / 2 + r + ring * 2 * r
@@ -682,6 +693,7 @@ class Game:
         d = u.data
         if u.owner == PLAYER_SELF:
             self.lost_value += d.minerals
+            self._value(u, -1)
         if d.supply_cost:
             self._add_food(u.utype, -d.supply_cost)
         if u.utype == md.MARINE:
@@ -700,6 +712,16 @@ class Game:
             if u.builder is not None and u.builder.alive:
                 u.builder.building = None
                 self.order_idle(u.builder, t)
+
+
+def category(utype: int) -> int:
+    """pysc2 ``ScoreCategories`` index of a unit type: marines army (1); SCVs, the CC and depots
+    economy (2); barracks technology (3)."""
+    if utype == md.MARINE:
+        return 1
+    if utype == md.BARRACKS:
+        return 3
+    return 2
 
 
 def _tag(u: Unit) -> int:

@@ -66,6 +66,18 @@ def unit_vec(g: Game, u: Unit) -> list[int]:
             int(prog * 100) if prog < 1.0 else 0]
 
 
+def unit_rows(g: Game, units: list[Unit], hp: np.ndarray, prog: np.ndarray) -> np.ndarray:
+    """:func:`unit_vec` for many units at once, from the drawing's per-slot hp and progress."""
+    slots = np.fromiter((u.slot for u in units), dtype=np.intp, count=len(units))
+    out = np.zeros((len(units), len(features.UnitLayer)), dtype=np.int32)
+    out[:, 0] = g.table.utype[slots]
+    out[:, 1] = g.table.attr[1, slots + 1]
+    out[:, 2] = hp[slots]
+    p = prog[slots]
+    out[:, 6] = (p < 1.0) * (p * 100.0)
+    return out
+
+
 def _queue_vec(g: Game, b: Unit, i: int, utype: int) -> list[int]:
     d = md.UNIT_DATA[utype]
     prog = g.item_progress(b, float(g.loop)) if i == 0 else 0.0
@@ -79,51 +91,40 @@ _TRAIN_ABILITY = {md.SCV: actions.FUNCTIONS.Train_SCV_quick.ability_id,
 def score_arrays(g: Game) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``score_cumulative``, ``score_by_category``, ``score_by_vital`` of the game so far.
 
-    ``score`` counts marines made (the map's curriculum score); times are in game seconds;
-    values are mineral costs. Categories: SCVs, the CC and depots are economy, barracks
-    technology, marines army.
+    ``score`` counts marines made (the map's curriculum score); idle times are in game seconds;
+    values are mineral costs of living units (``total_value_*``, ``used_minerals``) or totals
+    (``collected``, ``spent``, ``lost``); every loss here is friendly fire. Categories: marines
+    army, SCVs, the CC and depots economy, barracks technology.
     """
-    units_value = 0
-    structures_value = 0
-    used = [0, 0, 0, 0, 0]
-    for u in g.units.values():
-        if u.owner != PLAYER_SELF:
-            continue
-        v = u.data.minerals
-        if u.data.structure:
-            structures_value += v
-        else:
-            units_value += v
-        used[_category(u.utype)] += v
     cum = np.array([
         g.score, int(g.idle_production_time / md.LOOPS_PER_GAME_SECOND),
-        int(g.idle_worker_time / md.LOOPS_PER_GAME_SECOND), units_value, structures_value,
+        int(g.idle_worker_time / md.LOOPS_PER_GAME_SECOND), g.value_units, g.value_structures,
         0, 0, g.collected, 0, g.collection_rate(), 0, g.spent, 0,
     ], dtype=np.int32)
     cat = np.zeros((len(features.ScoreByCategory), len(features.ScoreCategories)), np.int32)
-    cat[features.ScoreByCategory.food_used, 1] = g.food_army
-    cat[features.ScoreByCategory.food_used, 2] = g.food_workers
-    cat[features.ScoreByCategory.used_minerals] = used
-    cat[features.ScoreByCategory.lost_minerals, 0] = g.lost_value
-    cat[features.ScoreByCategory.friendly_fire_minerals, 0] = g.lost_value
-    cat[features.ScoreByCategory.total_used_minerals, 0] = g.spent
+    cat[_FOOD, _ARMY] = g.food_army
+    cat[_FOOD, _ECONOMY] = g.food_workers
+    cat[_USED] = g.value_by_category
+    cat[_LOST, 0] = g.lost_value
+    cat[_FRIENDLY, 0] = g.lost_value
+    cat[_TOTAL_USED, 0] = g.spent
     vit = np.zeros((len(features.ScoreByVital), len(features.ScoreVitals)), np.int32)
-    vit[features.ScoreByVital.total_damage_dealt, 0] = int(g.damage_dealt)
-    vit[features.ScoreByVital.total_damage_taken, 0] = int(g.damage_dealt)
+    vit[0, 0] = vit[1, 0] = int(g.damage_dealt)  # dealt and taken: all of it is friendly
     return (named(cum, _SCORE_NAMES), named(cat, _CAT_NAMES), named(vit, _VITAL_NAMES))
 
 
-def _category(utype: int) -> int:
-    if utype == md.MARINE:
-        return features.ScoreCategories.army
-    if utype == md.BARRACKS:
-        return features.ScoreCategories.technology
-    return features.ScoreCategories.economy
+_FOOD = int(features.ScoreByCategory.food_used)
+_USED = int(features.ScoreByCategory.used_minerals)
+_LOST = int(features.ScoreByCategory.lost_minerals)
+_FRIENDLY = int(features.ScoreByCategory.friendly_fire_minerals)
+_TOTAL_USED = int(features.ScoreByCategory.total_used_minerals)
+_ARMY = int(features.ScoreCategories.army)
+_ECONOMY = int(features.ScoreCategories.economy)
 
 
 def build(g: Game, c: Commands, screen: np.ndarray, minimap: np.ndarray,
-          available: list[int]) -> named_array.NamedDict:
-    """The observation dict for the game's current loop."""
+          available: list[int], hp: np.ndarray, prog: np.ndarray) -> named_array.NamedDict:
+    """The observation dict for the game's current loop (``hp``/``prog``: per-slot values)."""
     out = named_array.NamedDict({
         "single_select": _EMPTY_UNITS,
         "multi_select": _EMPTY_UNITS,
@@ -165,8 +166,7 @@ def build(g: Game, c: Commands, screen: np.ndarray, minimap: np.ndarray,
                 [(_TRAIN_ABILITY[q], first * 100 if i == 0 else 0)
                  for i, q in enumerate(b.queue)], dtype=np.int32), _PQ_NAMES)
     elif sel:
-        out["multi_select"] = named(np.array([unit_vec(g, u) for u in sel], dtype=np.int32),
-                                    _UNIT_NAMES)
+        out["multi_select"] = named(unit_rows(g, sel, hp, prog), _UNIT_NAMES)
     out["upgrades"] = np.array([], dtype=np.int32)
     out["available_actions"] = np.array(available, dtype=np.int32)
     out["home_race_requested"] = np.array([HOME_RACE], dtype=np.int32)

@@ -19,8 +19,10 @@ disks covering a pixel, ``unit_density_aa`` 16 × the covered fraction summed ov
 ``clip(R + ½ − distance, 0, 1)``; ``build_progress`` progress × 255 for a structure under
 construction, 0 otherwise; ``pathable``/``buildable`` the playable ground less every
 structure's and mineral field's footprint. The minimap draws the whole 64×64 map at one pixel
-per world unit (pysc2's transform with ``crop_to_playable_area=False``), units at least
-0.75 px in radius so each shows, and ``camera`` marks the screen's world rectangle.
+per world unit (pysc2's transform with ``crop_to_playable_area=False``): structures as disks at
+least 1 px in radius, each SCV or marine (smaller than a pixel) on the pixel it stands in; and
+``camera`` marks the screen's world rectangle. Only the 7 minimap layers of unit and terrain
+meaning are drawn from units (no density layers exist on the minimap).
 """
 
 from __future__ import annotations
@@ -40,17 +42,18 @@ _UNIT_MINIMAP = [M.player_id.index, M.player_relative.index, M.unit_type.index,
                  M.selected.index]
 _N = md.SCREEN
 _NM = md.MINIMAP
-MINIMAP_MIN_RADIUS = 0.75
-"""Smallest drawn minimap radius in pixels (a 0.375 unit would often cover no pixel centre)."""
+MINIMAP_MIN_RADIUS = 1.0
+"""Smallest drawn minimap radius of a structure in pixels; ground units (0.375 world units,
+smaller than a minimap pixel) mark the one pixel they stand in."""
 
 
 def stamp(cx: np.ndarray, cy: np.ndarray, radius: float, size: int
           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Pixels of disks of ``radius`` px centred at (cx, cy) on a ``size``² image.
+    """Pixels of disks of ``radius`` px centred at (cx, cy) on a ``size``² image (exact).
 
     Returns (unit index, flat pixel, inside-disk flag, anti-aliased coverage in [0, 1]) for every
     pixel with non-zero coverage; the disk itself is the pixels whose centres lie within
-    ``radius``.
+    ``radius``. Used for the few static structures; moving units use :class:`DiskStamp`.
     """
     w = int(2 * radius + 1) + 2
     x0 = np.floor(cx - radius - 0.5).astype(np.int64)
@@ -68,12 +71,58 @@ def stamp(cx: np.ndarray, cy: np.ndarray, radius: float, size: int
     return n, flat, d2[keep] <= radius * radius, cov[keep]
 
 
+class DiskStamp:
+    """Disk pixels of one radius for many moving units, from precomputed sub-pixel tables.
+
+    A unit's centre is split into a whole pixel and a sub-pixel offset quantised to 1/16 px
+    (0.02 world units on the screen); for each of the 16×16 offsets the disk mask and coverage
+    of the surrounding window are tabulated once, so a frame costs a few array operations
+    whatever the number of units.
+    """
+
+    Q = 16
+
+    def __init__(self, radius: float, size: int) -> None:
+        self.radius = radius
+        self.size = size
+        w = int(2 * radius + 1) + 2
+        o = np.arange(w)
+        q = (np.arange(self.Q) + 0.5) / self.Q
+        d1 = o[None, :] - radius - q[:, None]  # (Q, w): pixel centre − unit centre
+        d2 = d1[:, None, :, None] ** 2 + d1[None, :, None, :] ** 2  # (Qy, Qx, wy, wx)
+        d2 = d2.reshape(self.Q * self.Q, w * w)
+        self.disk = d2 <= radius * radius
+        self.cov = np.clip(radius + 0.5 - np.sqrt(d2), 0.0, 1.0)
+        oy, ox = np.divmod(np.arange(w * w), w)
+        self.ox, self.oy = ox, oy
+        self.sentinel = size * size
+
+    def __call__(self, cx: np.ndarray, cy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(flat disk pixel or sentinel, flat covered pixel or sentinel, coverage), each (N, w²)."""
+        bx = cx - (self.radius + 0.5)
+        by = cy - (self.radius + 0.5)
+        fx = np.floor(bx)
+        fy = np.floor(by)
+        v = ((by - fy) * self.Q).astype(np.intp) * self.Q + ((bx - fx) * self.Q).astype(np.intp)
+        x = fx.astype(np.intp)[:, None] + self.ox
+        y = fy.astype(np.intp)[:, None] + self.oy
+        size = self.size
+        inb = (x.view(np.uintp) < size) & (y.view(np.uintp) < size)
+        flat = y * size + x
+        fa = np.where(inb, flat, self.sentinel)
+        fd = np.where(self.disk[v], fa, self.sentinel)
+        return fd, fa, self.cov[v]
+
+
 class _Layer:
-    """The stamped pixels of a set of units on one image (screen or minimap)."""
+    """The stamped pixels of a set of units on one image (screen or minimap).
+
+    ``top`` has one extra sentinel entry at the end for pixels that fall off the image.
+    """
 
     def __init__(self, size: int) -> None:
         self.size = size
-        self.top = np.zeros(size * size, dtype=np.int64)
+        self.top = np.zeros(size * size + 1, dtype=np.intp)
         self.density = np.zeros(size * size, dtype=np.int64)
         self.aa = np.zeros(size * size, dtype=np.float64)
 
@@ -106,6 +155,11 @@ class Renderer:
         self._version = -1
         self._s_static = _Layer(_N)
         self._m_static = _Layer(_NM)
+        small = md.UNIT_DATA[md.SCV].radius  # every ground unit here: SCV and Marine, 0.375
+        self._s_disk = DiskStamp(small * md.PX_PER_UNIT, _N)
+        self._attr = np.zeros((7, 1), dtype=np.int32)
+        self.hp = np.zeros(0)
+        self.progress = np.zeros(0)
 
     # ------------------------------------------------------------------ static part
 
@@ -137,67 +191,69 @@ class Renderer:
 
     # ------------------------------------------------------------------ frame
 
-    def _ground(self, g: Game, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        tab = g.table
-        slots = np.flatnonzero(tab.alive & (tab.layer == 1))
-        if len(slots) > 1:
-            slots = slots[np.argsort(tab.tag[slots], kind="stable")]
-        t0, t1 = tab.t0[slots], tab.t1[slots]
-        f = np.clip((t - t0) / np.maximum(t1 - t0, 1e-9), 0.0, 1.0)
-        x = tab.x0[slots] + (tab.x1[slots] - tab.x0[slots]) * f
-        y = tab.y0[slots] + (tab.y1[slots] - tab.y0[slots]) * f
-        return slots, x, y
-
     @staticmethod
-    def _compose(static: _Layer, slots: np.ndarray, cx: np.ndarray, cy: np.ndarray,
-                 radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        size = static.size
-        n, flat, disk, cov = stamp(cx, cy, radius, size)
-        dn, dflat = n[disk], flat[disk]
-        order = np.zeros(size * size, dtype=np.int64)
-        np.maximum.at(order, dflat, dn + 1)
-        top = np.where(order > 0, slots[np.maximum(order - 1, 0)] + 1, static.top)
-        density = static.density + np.bincount(dflat, minlength=size * size)
-        aa = static.aa + np.bincount(flat, weights=cov, minlength=size * size)
+    def _compose(static: _Layer, disk: DiskStamp, slots: np.ndarray, cx: np.ndarray,
+                 cy: np.ndarray, want_density: bool
+                 ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """Top-unit image (slot + 1), and density and coverage if wanted, of static + ground."""
+        n = static.size * static.size
+        fd, fa, cov = disk(cx, cy)
+        top = static.top.copy()
+        # Later (higher-tag) units overwrite earlier ones: numpy assigns repeated indices in
+        # order, and the sentinel pixel n takes what falls outside the disk or the image.
+        top[fd.ravel()] = np.repeat(slots + 1, fd.shape[1])
+        top = top[:n]
+        if not want_density:
+            return top, None, None
+        density = static.density + np.bincount(fd.ravel(), minlength=n + 1)[:n]
+        aa = static.aa + np.bincount(fa.ravel(), weights=cov.ravel(), minlength=n + 1)[:n]
         return top, density, aa
+
+    def _attributes(self, g: Game, t: float) -> np.ndarray:
+        """The table's per-slot layer values with hit points, ratio and progress at ``t``."""
+        tab = g.table
+        prog = np.minimum(tab.prog0 + tab.prate * (t - tab.pt0), 1.0)
+        hp = np.maximum(tab.hpmax * (0.1 + 0.9 * prog) - tab.dmg, 0.0)
+        a = tab.attr
+        a[4, 1:] = hp
+        a[5, 1:] = hp * tab.ratio_k
+        a[6, 1:] = (prog < 1.0) * (prog * 255.0)
+        self.hp, self.progress = hp, prog
+        return a
+
+    def _minimap_top(self, slots: np.ndarray, wx: np.ndarray, wy: np.ndarray) -> np.ndarray:
+        """Minimap top-unit image: structures stamped, each ground unit on the pixel it is in."""
+        n = _NM * _NM
+        ms = _NM / md.MAP_SIZE
+        px = (wx * ms).astype(np.intp)
+        py = ((md.MAP_SIZE - wy) * ms).astype(np.intp)
+        flat = np.where((px.view(np.uintp) < _NM) & (py.view(np.uintp) < _NM), py * _NM + px, n)
+        top = self._m_static.top.copy()
+        top[flat] = slots + 1
+        return top[:n]
 
     def draw(self, g: Game) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(feature_screen, feature_minimap, top-unit image) at the game's current loop."""
         if self._version != g.grid_version:
             self._refresh_static(g)
         t = float(g.loop)
-        tab = g.table
-        slots, wx, wy = self._ground(g, t)
+        slots = g.table.ground()
+        wx, wy = g.table.positions(slots, t)
+        attr = self._attributes(g, t)
 
-        # Per-slot attribute table; row 0 is "no unit".
-        prog = np.minimum(tab.prog0 + tab.prate * (t - tab.pt0), 1.0)
-        hp = tab.hpmax * (0.1 + 0.9 * prog) - tab.dmg
-        ratio = np.where(tab.hpmax > 0, hp / np.maximum(tab.hpmax, 1.0) * 255.0, 0.0)
-        under = prog < 1.0
-        cap = tab.capacity
-        table = np.zeros((7, cap + 1), dtype=np.int32)
-        table[0, 1:] = tab.owner
-        table[1, 1:] = np.where(tab.owner == 1, features.PlayerRelative.SELF,
-                                features.PlayerRelative.NEUTRAL)
-        table[2, 1:] = tab.utype
-        table[3, 1:] = tab.selected
-        table[4, 1:] = np.maximum(hp, 0.0)
-        table[5, 1:] = np.maximum(ratio, 0.0)
-        table[6, 1:] = np.where(under, prog * 255.0, 0.0)
-
-        small = md.UNIT_DATA[md.SCV].radius
         sx = (wx - md.SCREEN_X0) * md.PX_PER_UNIT
         sy = (md.SCREEN_Y0 - wy) * md.PX_PER_UNIT
-        top, density, aa = self._compose(self._s_static, slots, sx, sy, small * md.PX_PER_UNIT)
+        top, density, aa = self._compose(self._s_static, self._s_disk, slots, sx, sy, True)
         screen = self.screen_base.copy()
-        screen[_UNIT_SCREEN] = table[:, top].reshape(7, _N, _N)
-        screen[S.unit_density.index] = density.reshape(_N, _N)
-        screen[S.unit_density_aa.index] = np.minimum(np.rint(aa * 16.0), 255).reshape(_N, _N)
+        flat = screen.reshape(len(S), _N * _N)
+        for row, layer in enumerate(_UNIT_SCREEN):
+            attr[row].take(top, out=flat[layer], mode="clip")
+        flat[S.unit_density.index] = density
+        flat[S.unit_density_aa.index] = np.minimum(aa * 16.0 + 0.5, 255.0)
 
-        ms = _NM / md.MAP_SIZE
-        mtop, _, _ = self._compose(self._m_static, slots, wx * ms, (md.MAP_SIZE - wy) * ms,
-                                   max(small * ms, MINIMAP_MIN_RADIUS))
+        mtop = self._minimap_top(slots, wx, wy)
         minimap = self.minimap_base.copy()
-        minimap[_UNIT_MINIMAP] = table[:4, mtop].reshape(4, _NM, _NM)
+        mflat = minimap.reshape(len(M), _NM * _NM)
+        for row, layer in enumerate(_UNIT_MINIMAP):
+            attr[row].take(mtop, out=mflat[layer], mode="clip")
         return screen, minimap, top.reshape(_N, _N)
-

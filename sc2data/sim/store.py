@@ -117,40 +117,51 @@ class Unit:
 
 
 class UnitTable:
-    """Struct of arrays over unit slots: what the feature layers are drawn from."""
+    """Struct of arrays over unit slots: what the feature layers are drawn from.
+
+    ``f`` holds float columns (:data:`FLOAT_COLS`), ``i`` integer ones; ``attr`` holds the
+    int32 values of the per-unit layers with one leading "no unit" entry, so a layer is
+    ``attr[row].take(top)`` for a top-unit image of slot + 1. Rows 0–3 (player_id,
+    player_relative, unit_type, selected) change only on creation, death and selection; the
+    drawing fills rows 4–6 (hit points, their ratio, build progress) each frame.
+    """
 
     FLOAT_COLS = ("x0", "y0", "t0", "x1", "y1", "t1", "prog0", "pt0", "prate", "dmg",
-                  "radius", "hpmax")
-    INT_COLS = ("utype", "owner", "layer", "tag", "selected")
+                  "radius", "hpmax", "ratio_k")
+    INT_COLS = ("utype", "owner", "layer", "tag")
+    ATTR_ROWS = 7
 
     def __init__(self, capacity: int = 512) -> None:
-        self.capacity = capacity
-        self.alive = np.zeros(capacity, dtype=bool)
-        self.f = np.zeros((len(self.FLOAT_COLS), capacity), dtype=np.float64)
-        self.i = np.zeros((len(self.INT_COLS), capacity), dtype=np.int64)
+        self.capacity = 0
+        self.alive = np.zeros(0, dtype=bool)
+        self.f = np.zeros((len(self.FLOAT_COLS), 0), dtype=np.float64)
+        self.i = np.zeros((len(self.INT_COLS), 0), dtype=np.int64)
+        self.attr = np.zeros((self.ATTR_ROWS, 1), dtype=np.int32)
+        self._free: list[int] = []
+        self._ground: list[int] = []
+        self._ground_arr: np.ndarray | None = None
+        self._grow(capacity)
+
+    def _grow(self, extra: int) -> None:
+        old = self.capacity
+        self.capacity = old + extra
+        self.alive = np.concatenate([self.alive, np.zeros(extra, dtype=bool)])
+        self.f = np.concatenate([self.f, np.zeros((self.f.shape[0], extra))], axis=1)
+        self.i = np.concatenate([self.i, np.zeros((self.i.shape[0], extra), np.int64)], axis=1)
+        self.attr = np.concatenate([self.attr, np.zeros((self.ATTR_ROWS, extra), np.int32)],
+                                   axis=1)
         for n, k in enumerate(self.FLOAT_COLS):
             setattr(self, k, self.f[n])
         for n, k in enumerate(self.INT_COLS):
             setattr(self, k, self.i[n])
-        self._free: list[int] = list(range(capacity - 1, -1, -1))
+        self.selected = self.attr[3, 1:]
+        self._free = sorted(self._free + list(range(old, self.capacity)), reverse=True)
 
     def allocate(self) -> int:
         """A free slot (the lowest), growing the table when full."""
         if not self._free:
-            self._grow()
+            self._grow(self.capacity)
         return self._free.pop()
-
-    def _grow(self) -> None:
-        old = self.capacity
-        self.capacity *= 2
-        self.alive = np.concatenate([self.alive, np.zeros(old, dtype=bool)])
-        self.f = np.concatenate([self.f, np.zeros_like(self.f)], axis=1)
-        self.i = np.concatenate([self.i, np.zeros_like(self.i)], axis=1)
-        for n, k in enumerate(self.FLOAT_COLS):
-            setattr(self, k, self.f[n])
-        for n, k in enumerate(self.INT_COLS):
-            setattr(self, k, self.i[n])
-        self._free = list(range(self.capacity - 1, old - 1, -1))
 
     def add(self, u: Unit) -> None:
         """Mirror a new unit into its slot."""
@@ -158,24 +169,43 @@ class UnitTable:
         d = u.data
         self.alive[s] = True
         self.f[:, s] = (u.x0, u.y0, u.t0, u.x1, u.y1, u.t1, u.prog0, u.pt0, u.prate, u.dmg,
-                        d.radius, d.hp)
-        self.i[:, s] = (u.utype, u.owner, 0 if d.structure else 1, u.tag, 0)
+                        d.radius, d.hp, 255.0 / d.hp if d.hp else 0.0)
+        self.i[:, s] = (u.utype, u.owner, 0 if d.structure else 1, u.tag)
+        rel = 1 if u.owner == PLAYER_SELF else 3  # features.PlayerRelative SELF / NEUTRAL
+        self.attr[:4, s + 1] = (u.owner, rel, u.utype, 0)
+        if not d.structure:
+            self._ground.append(s)  # tags only grow, so this list stays in tag order
+            self._ground_arr = None
 
     def remove(self, u: Unit) -> None:
         s = u.slot
         self.alive[s] = False
-        self.selected[s] = 0
+        self.attr[:, s + 1] = 0
         self._free.append(s)
         self._free.sort(reverse=True)
+        if not u.data.structure:
+            self._ground.remove(s)
+            self._ground_arr = None
+
+    def ground(self) -> np.ndarray:
+        """Slots of the ground units (SCVs, marines), in tag order (later ones drawn on top)."""
+        if self._ground_arr is None:
+            self._ground_arr = np.array(self._ground, dtype=np.intp)
+        return self._ground_arr
+
+    def positions(self, slots: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """World positions of ``slots`` at loop ``t``."""
+        x0, y0, t0, x1, y1, t1 = self.f[:6, slots]
+        f = np.minimum(np.maximum((t - t0) / np.maximum(t1 - t0, 1e-9), 0.0), 1.0)
+        return x0 + (x1 - x0) * f, y0 + (y1 - y0) * f
 
     def motion(self, u: Unit) -> None:
-        s = u.slot
-        self.f[:6, s] = (u.x0, u.y0, u.t0, u.x1, u.y1, u.t1)
+        self.f[:6, u.slot] = (u.x0, u.y0, u.t0, u.x1, u.y1, u.t1)
 
     def build(self, u: Unit) -> None:
-        s = u.slot
-        self.f[6:10, s] = (u.prog0, u.pt0, u.prate, u.dmg)
+        self.f[6:10, u.slot] = (u.prog0, u.pt0, u.prate, u.dmg)
 
     def snapshot(self) -> dict[str, Any]:
         """Copies of all columns (for determinism checks and debugging)."""
-        return {"alive": self.alive.copy(), "f": self.f.copy(), "i": self.i.copy()}
+        return {"alive": self.alive.copy(), "f": self.f.copy(), "i": self.i.copy(),
+                "attr": self.attr.copy()}

@@ -385,14 +385,16 @@ class Game:
                 self._start_harvest(w, p, t)
 
     def _start_harvest(self, u: Unit, p: Unit, t: float) -> None:
+        """``u`` takes the field: it mines once the previous miner has cleared it."""
         u.phase = HARVESTING
         p.harvester = u
-        self._at(t + md.HARVEST_LOOPS, HARVEST_DONE, u)
+        self._at(max(t, p.ready) + md.HARVEST_LOOPS, HARVEST_DONE, u)
 
     def _harvest_done(self, u: Unit, t: float) -> None:
         p = u.patch
         assert p is not None
         p.harvester = None
+        p.ready = t + md.PATCH_CLEAR_LOOPS
         take = min(md.CARRY, p.minerals)
         p.minerals -= take
         u.cargo = take

@@ -146,14 +146,19 @@ MARINE_RANGE = 5.0
 # Mining (brief §4): 5 minerals a trip, a patch is busy ≈44.6 loops per harvest.
 HARVEST_LOOPS = 44.6
 CARRY = 5
-MINING_LEG_OVERHEAD = 22.0
+PATCH_CLEAR_LOOPS = 10.0
+"""Loops after a harvest before the next worker can start on the same field (the first
+turning away, the second stepping in). It caps a field at 5 / 54.6 minerals per loop, so a third
+worker on a field adds little, as in the game."""
+MINING_LEG_OVERHEAD = 29.0
 """Loops added to each mining leg (patch→CC, CC→patch) beyond distance/speed.
 
-The straight-line legs here are 1–3 world units; a real SCV accelerates, decelerates, turns and
-paths around the footprints, which the game's traces show as a ≈115-loop trip for a worker alone
-on a patch. This one number is calibrated so the income matches the brief's real-game traces
-(first minerals ≈120 loops in, ≈0.52 minerals/loop with 12–14 SCVs, ≈0.63 at saturation);
-``tests/sim/test_economy.py`` holds it there.
+The straight-line legs here are 1.5–3 world units (≈8–15 loops); a real SCV accelerates,
+decelerates, turns and paths around the footprints, which the game's traces show as a ≈125-loop
+round trip (≈0.04 minerals per loop per worker). This one number is calibrated so the income
+matches the brief's real-game traces: first minerals ≈120 loops in (SCVs on the mineral side),
+≈0.52 minerals/loop with 12–14 SCVs, ≈0.63 at saturation (16); ``tests/sim/test_economy.py``
+holds it there.
 """
 WORKERS_PER_PATCH = 2
 """Workers spread to another field when theirs already has this many (the game's bouncing)."""

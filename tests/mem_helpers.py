@@ -14,7 +14,7 @@ SMALL_SCHEMA = Schema.from_names(["unit_type", "player_relative", "unit_hit_poin
 
 
 def tiny_pairset(path: Path, schema: Schema | None = None, **kw: object) -> Path:
-    from sc2data.synthetic import write_pairset
+    from sc2data.synthetic_pairs import write_pairset
 
     args = dict(states_per_command=24, null_states=40, episodes=12, seed=0)
     args.update(kw)

@@ -18,7 +18,7 @@ from sc2data.model import (MEM, ModelConfig, load_checkpoint, save_checkpoint,  
                            to_tensors, value_tables)
 from sc2data.reward import MEMScorer  # noqa: E402
 from sc2data.schema import Schema  # noqa: E402
-from sc2data.synthetic import stacks  # noqa: E402
+from sc2data.synthetic_pairs import stacks  # noqa: E402
 
 VECTORS = np.random.default_rng(0).normal(size=(4, 5)).astype(np.float32)
 WORDS = ("build", "a", "supply", "depot")

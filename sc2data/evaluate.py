@@ -239,14 +239,17 @@ def tsne(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None
         ax.scatter(*s_xy[m].T, s=8, color=colours[cid], alpha=0.7,
                    label=f"{canon[cid]} ({int(m.sum())})")
     style = {"canonical": ("*", 420), "paraphrase": ("D", 90), "extra": ("X", 160)}
+    notes = []
     for (text, cid, kind), (x, y) in zip(marks, t_xy):
         marker, size = style[kind]
         ax.scatter([x], [y], marker=marker, s=size, color=colours.get(cid, "black"),
                    edgecolors="black", linewidths=1.2, zorder=5)
-        ax.annotate(text, (x, y), xytext=(8, 6), textcoords="offset points", zorder=6,
-                    fontsize=9 if kind == "canonical" else 7,
-                    fontweight="bold" if kind == "canonical" else "normal",
-                    bbox=dict(boxstyle="round,pad=0.2", fc="white", alpha=0.75, lw=0))
+        notes.append(ax.annotate(
+            text, (x, y), xytext=(10, 6), textcoords="offset points", zorder=6,
+            fontsize=9 if kind == "canonical" else 7,
+            fontweight="bold" if kind == "canonical" else "normal",
+            arrowprops=dict(arrowstyle="-", lw=0.6, color="0.3"),
+            bbox=dict(boxstyle="round,pad=0.2", fc="white", alpha=0.8, lw=0)))
     for kind, (marker, _) in style.items():
         if any(m[2] == kind for m in marks):
             ax.scatter([], [], marker=marker, color="white", edgecolors="black",
@@ -258,9 +261,41 @@ def tsne(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None
     ax.set_yticks([])
     path = Path(out) if out else run / "tsne.png"
     fig.tight_layout()
+    _declutter(fig, notes)
     fig.savefig(path, dpi=130)
     plt.close(fig)
     return path
+
+
+def _declutter(fig: Any, notes: list[Any]) -> None:
+    """Move command labels apart: right or left of the mark, stepping up or down, until a label
+    overlaps no earlier one and stays inside the axes."""
+    from matplotlib.text import Text
+
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    frame = notes[0].axes.get_window_extent(renderer) if notes else None
+    steps = [0] + [d * k for k in range(1, 16) for d in (-1, 1)]
+    placed: list[Any] = []
+
+    def put(side: str, dy: float) -> Any:
+        note.set_position((10, dy) if side == "right" else (-10, dy))
+        note.set_horizontalalignment("left" if side == "right" else "right")
+        return Text.get_window_extent(note, renderer)  # the text alone, not its arrow
+
+    for note in notes:
+        best = None  # (overlaps, side, dy) of the least crowded spot inside the axes
+        for side, dy in [(side, 6 + 10 * k) for k in steps for side in ("right", "left")]:
+            box = put(side, dy)
+            if not (box.x0 >= frame.x0 and box.x1 <= frame.x1 and box.y0 >= frame.y0
+                    and box.y1 <= frame.y1):
+                continue
+            crowd = sum(box.overlaps(b) for b in placed)
+            if best is None or crowd < best[0]:
+                best = (crowd, side, dy)
+            if crowd == 0:
+                break
+        placed.append(put(best[1], best[2]) if best else put("right", 6))
 
 
 def _tsne(x: np.ndarray, seed: int) -> np.ndarray:

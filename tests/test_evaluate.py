@@ -10,7 +10,7 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from mem_helpers import (assert_one_line_error, run_cli, tiny_pairset,  # noqa: E402
+from tests.mem_helpers import (assert_one_line_error, run_cli, tiny_pairset,  # noqa: E402
                          train_tiny)
 
 import sc2data.evaluate as ev  # noqa: E402

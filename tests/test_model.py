@@ -9,7 +9,7 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from mem_helpers import SMALL_SCHEMA  # noqa: E402
+from tests.mem_helpers import SMALL_SCHEMA  # noqa: E402
 
 from sc2data import load_model  # noqa: E402
 from sc2data._pysc2 import units  # noqa: E402

@@ -13,7 +13,7 @@ import pytest
 
 pytest.importorskip("torch")
 
-from mem_helpers import (assert_one_line_error, run_cli, tiny_pairset,  # noqa: E402
+from tests.mem_helpers import (assert_one_line_error, run_cli, tiny_pairset,  # noqa: E402
                          train_tiny)
 
 import sc2data.loader as loader_mod  # noqa: E402

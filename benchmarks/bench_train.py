@@ -29,7 +29,8 @@ PAPER_TRAIN, PAPER_VAL, PAPER_EPOCHS = 100_000, 25_000, 20
 
 
 def loader_alone(data: Path, pool: int, categorical: str, passes: int) -> float:
-    """Pairs/s of one shuffled pass over the train split, packed for the model, no training."""
+    """Pairs/s of a shuffled pass over the train split, as the trainer's loader delivers it
+    (packed in numpy on a CPU; raw, pinned tensors on a GPU machine), with no training."""
     import torch
 
     from sc2data import model as M
@@ -41,9 +42,10 @@ def loader_alone(data: Path, pool: int, categorical: str, passes: int) -> float:
     cfg = M.ModelConfig(categorical=categorical, pool=pool)  # type: ignore[arg-type]
     tables = M.value_tables(ps.schema, [packed.read(0, min(len(packed), 1024))], cfg.max_table)
     model = M.MEM(ps.schema, tables, np.zeros((2, 50), np.float32), cfg)
+    cuda = torch.cuda.is_available()  # as sc2data train: on a GPU, packing runs on the GPU
     loader = PairLoader(packed, p.state, np.zeros(len(p), np.int64), p.target, 32,
-                        model.state.keys(), True, transform=lambda a: M.to_tensors(
-                            model.state.pack(a), pin=torch.cuda.is_available()))
+                        model.state.keys(), True, transform=lambda a: M.to_tensors(a, pin=True)
+                        if cuda else M.to_tensors(model.state.pack(a)))
     rates = []
     for e in range(passes):
         t0, n = time.perf_counter(), 0

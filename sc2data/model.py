@@ -125,6 +125,9 @@ class SpatialInput(nn.Module):
         self.sizes = sizes
         self._lut = np.concatenate(lut).astype(np.int16) if lut else np.zeros(0, np.int16)
         self._raw_offsets = np.array(raw_offsets, np.int32)
+        self.register_buffer("lut", torch.from_numpy(self._lut.astype(np.int64)), persistent=False)
+        self.register_buffer("raw_offsets", torch.from_numpy(self._raw_offsets.astype(np.int64)),
+                             persistent=False)
         self.register_buffer("first", torch.tensor(first, dtype=torch.long))
         self.register_buffer("inv_n", torch.tensor([1.0 / max(n - 1, 1) for n in sizes]))
         self.cat_width = len(sizes) if self.mode == "scalar" else sum(sizes)
@@ -158,6 +161,25 @@ class SpatialInput(nn.Module):
                         cell += x[:, :, dy::p, dx::p]
                     a[..., i] = cell.transpose(0, 2, 3, 1) * (1.0 / p ** 2)
                 out[part] = a
+        return out
+
+    def pack_torch(self, arrays: Mapping[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+        """:meth:`pack` in torch, for a GPU: raw stacks go to the device, packing runs there."""
+        out: dict[str, torch.Tensor] = {}
+        p = self.pool
+        for part, keys in (("idx", self.cat_keys), ("scalar", self.scalar_keys)):
+            if not keys:
+                continue
+            x = torch.stack([arrays[k] for k in keys], -1)  # (B, 2, H, W, L)
+            b, t, h, w, n = x.shape
+            if h % p or w % p:
+                raise Sc2DataError(f"{keys[0]} is {h}×{w}, not divisible by the pool size {p}")
+            if part == "idx":
+                x = self.lut[x.long() + self.raw_offsets].view(b, t, h // p, p, w // p, p, n)
+                out[part] = x.permute(0, 2, 4, 1, 3, 5, 6).reshape(b, h // p, w // p, t, -1)
+            else:
+                x = x.float().view(b, t, h // p, p, w // p, p, n).sum((3, 5)) * (1.0 / p ** 2)
+                out[part] = x.permute(0, 2, 3, 1, 4)
         return out
 
     def forward(self, idx: torch.Tensor | None, scalar: torch.Tensor | None) -> torch.Tensor:
@@ -252,8 +274,10 @@ class StateEncoder(nn.Module):
     def forward(self, x: Mapping[str, torch.Tensor]) -> torch.Tensor:
         feats = [self.towers[g](self.inputs[g](x.get(f"{g}.idx"), x.get(f"{g}.scalar")))
                  for g in self.inputs]
-        if self.nonspatial is not None:
-            feats.append(self.nonspatial(x["vectors"]))
+        if self.nonspatial is not None:  # both frames and their change, sign(x)·log1p(|x|)
+            v = x["vectors"]
+            v = torch.cat([v[:, 0], v[:, 1], v[:, 1] - v[:, 0]], -1)
+            feats.append(self.nonspatial(torch.sign(v) * torch.log1p(v.abs())))
         return self.head(torch.cat(feats, 1))
 
     def keys(self) -> list[str]:
@@ -261,19 +285,26 @@ class StateEncoder(nn.Module):
         return [k for g in self.inputs.values() for k in g.scalar_keys + g.cat_keys] + self.vectors
 
     def pack(self, arrays: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """Stacks by schema key (``(B, 2, …)``) → this encoder's input arrays, in numpy.
+        """Stacks by schema key (``(B, 2, …)``) → this encoder's inputs, in numpy on the CPU.
 
-        Runs in the loader's thread, off the training loop: per group, see
-        :meth:`SpatialInput.pack`; the non-spatial vectors of both frames and their change as
-        sign(x)·log1p(|x|), float32 ``(B, 3F)``.
+        Runs in the loader's thread, off the training loop; see :meth:`SpatialInput.pack`. The
+        non-spatial vectors are concatenated, float32 ``(B, 2, F)``.
         """
         out: dict[str, np.ndarray] = {}
         for g, inp in self.inputs.items():
             out.update({f"{g}.{k}": a for k, a in inp.pack(arrays).items()})
         if self.vectors:
-            v = np.concatenate([arrays[n] for n in self.vectors], -1).astype(np.float32)
-            v = np.concatenate([v[:, 0], v[:, 1], v[:, 1] - v[:, 0]], -1)
-            out["vectors"] = np.sign(v) * np.log1p(np.abs(v))
+            out["vectors"] = np.concatenate([arrays[n] for n in self.vectors], -1).astype(
+                np.float32)
+        return out
+
+    def pack_torch(self, arrays: Mapping[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+        """:meth:`pack` for raw stack tensors already on a GPU (see :func:`raw_tensors`)."""
+        out: dict[str, torch.Tensor] = {}
+        for g, inp in self.inputs.items():
+            out.update({f"{g}.{k}": a for k, a in inp.pack_torch(arrays).items()})
+        if self.vectors:
+            out["vectors"] = torch.cat([arrays[n] for n in self.vectors], -1).float()
         return out
 
 
@@ -320,15 +351,29 @@ def distance(xs: torch.Tensor, xc: torch.Tensor) -> torch.Tensor:
     return torch.sqrt(((xs.float() - xc.float()) ** 2).sum(-1) + 1e-12)
 
 
-def to_tensors(packed: Mapping[str, np.ndarray], pin: bool = False) -> dict[str, torch.Tensor]:
-    """Packed numpy inputs → CPU tensors (pinned for fast, asynchronous copies to a GPU)."""
-    out = {k: torch.from_numpy(a) for k, a in packed.items()}
+def to_tensors(arrays: Mapping[str, np.ndarray], pin: bool = False) -> dict[str, torch.Tensor]:
+    """numpy arrays → CPU tensors, pinned for fast asynchronous copies to a GPU if ``pin``.
+
+    uint16 layers are viewed as int16 (no copy: every pysc2 scale is below 2¹⁵)."""
+    out = {k: torch.from_numpy(a.view(np.int16) if a.dtype == np.uint16 else a)
+           for k, a in arrays.items()}
     return {k: t.pin_memory() for k, t in out.items()} if pin else out
 
 
 def to_device(tensors: Mapping[str, torch.Tensor], device: torch.device
               ) -> dict[str, torch.Tensor]:
     return {k: t.to(device, non_blocking=True) for k, t in tensors.items()}
+
+
+def model_inputs(model: MEM, arrays: Mapping[str, np.ndarray], device: torch.device
+                 ) -> dict[str, torch.Tensor]:
+    """Raw stacks (numpy, by schema key) → the state encoder's inputs on ``device``: packed in
+    numpy on a CPU, in torch on a GPU."""
+    if device.type == "cpu":
+        return to_tensors(model.state.pack(arrays))
+    raw = to_device(to_tensors({k: np.ascontiguousarray(arrays[k])
+                                for k in model.state.keys()}), device)
+    return model.state.pack_torch(raw)
 
 
 def save_checkpoint(path: str | os.PathLike[str], model: MEM, words: tuple[str, ...],
@@ -386,4 +431,4 @@ def resolve_device(name: str) -> torch.device:
 
 
 __all__ = ["MEM", "ModelConfig", "distance", "load_checkpoint", "save_checkpoint",
-           "resolve_device", "to_device", "to_tensors", "value_tables"]
+           "model_inputs", "resolve_device", "to_device", "to_tensors", "value_tables"]

@@ -43,7 +43,7 @@ class MEMScorer:
         """``(B, dim)`` float32 state embeddings of a batch of two-frame stacks."""
         import torch
 
-        from sc2data.model import to_device, to_tensors
+        from sc2data.model import model_inputs
 
         arrays = stacks.arrays if isinstance(stacks, StackBatch) else stacks
         missing = [k for k in self._keys if k not in arrays]
@@ -61,7 +61,7 @@ class MEMScorer:
         with torch.no_grad():
             for s in range(0, n, batch_size):
                 part = {k: np.asarray(arrays[k][s:s + batch_size]) for k in self._keys}
-                x = to_device(to_tensors(self.model.state.pack(part)), self.device)
+                x = model_inputs(self.model, part, self.device)
                 out.append(self.model.state(x).float().cpu().numpy())
         return np.concatenate(out) if out else np.zeros((0, self.model.cfg.dim), np.float32)
 

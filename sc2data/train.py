@@ -121,11 +121,15 @@ def train(cfg: TrainConfig) -> Path:
     keys = model.state.keys()
     optimizer = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=cfg.lr)
 
+    def transform(stacks: dict[str, np.ndarray]) -> dict[str, Any]:
+        """In the loader's thread: pack in numpy for a CPU; raw pinned tensors for a GPU."""
+        return M.to_tensors(stacks, pin=True) if cuda else M.to_tensors(model.state.pack(stacks))
+
     def loader(split: str, packed: Any, shuffle: bool) -> PairLoader:
         p = splits[split]
         return PairLoader(packed, p.state, np.array([text_of[t] for t in p.command], np.int64),
                           p.target, cfg.batch_size, keys, shuffle, cfg.seed, cfg.window,
-                          transform=lambda a: M.to_tensors(model.state.pack(a), pin=cuda))
+                          transform=transform)
 
     train_loader = loader("train", train_split, True)
     val_loader = loader("val", val_split, False)
@@ -142,38 +146,47 @@ def train(cfg: TrainConfig) -> Path:
     (run / "config.json").write_text(json.dumps(config, indent=2))
     config = json.loads(json.dumps(config))  # plain types only: best.pt loads with weights_only
 
-    def step(batch: Any, train: bool) -> tuple[float, float, int]:
+    def step(batch: Any, train: bool) -> torch.Tensor:
+        """One batch; returns (Σ squared error, correct, pairs) as a tensor on the device, so
+        that a GPU is synchronised only when the progress bar or the epoch reads it."""
         x = M.to_device(batch.arrays, device)
+        if cuda:  # packing runs on the GPU
+            x = model.state.pack_torch(x)
         target = torch.from_numpy(batch.target).to(device, non_blocking=cuda)
         which = torch.from_numpy(batch.text).to(device, non_blocking=cuda)
         with torch.autocast(device.type, dtype=torch.bfloat16, enabled=cfg.amp and cuda):
-            d = model(x, ids_t, lengths_t, which)
-        mse = ((d.float() - target) ** 2).mean()
+            d = model(x, ids_t, lengths_t, which).float()
+        mse = ((d - target) ** 2).mean()
         if train:
             loss = mse + cfg.l2 * model.l2() if cfg.l2 else mse
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             optimizer.step()
-        correct = int(((d < M.THRESHOLD) == (target < 0.5)).sum())
-        return float(mse.detach()) * len(batch), correct, len(batch)
+        correct = ((d < M.THRESHOLD) == (target < 0.5)).sum()
+        return torch.stack([mse.detach() * len(batch), correct.float(),
+                            torch.tensor(float(len(batch)), device=device)])
 
     best = float("inf")
     with open(run / "metrics.jsonl", "w") as log:
         for epoch in range(1, cfg.epochs + 1):
             model.train()
-            t0, sums = time.perf_counter(), np.zeros(3)
+            t0, acc = time.perf_counter(), torch.zeros(3, device=device)
             bar = tqdm(train_loader.epoch(epoch), total=len(train_loader), unit="batch",
                        desc=f"epoch {epoch}/{cfg.epochs}", disable=not cfg.progress, leave=False)
-            for batch in bar:
-                sums += step(batch, True)
-                bar.set_postfix(loss=f"{sums[0] / sums[2]:.4f}", acc=f"{sums[1] / sums[2]:.3f}",
-                                pairs_s=f"{sums[2] / (time.perf_counter() - t0):.0f}")
+            for i, batch in enumerate(bar):
+                acc += step(batch, True)
+                if cfg.progress and i % 20 == 0:
+                    e, c, n = acc.tolist()
+                    bar.set_postfix(loss=f"{e / n:.4f}", acc=f"{c / n:.3f}",
+                                    pairs_s=f"{n / (time.perf_counter() - t0):.0f}")
+            sums = acc.tolist()
             seconds = time.perf_counter() - t0
             model.eval()
-            vsums, v0 = np.zeros(3), time.perf_counter()
+            vacc, v0 = torch.zeros(3, device=device), time.perf_counter()
             with torch.no_grad():
                 for batch in val_loader.epoch(0):
-                    vsums += step(batch, False)
+                    vacc += step(batch, False)
+            vsums = vacc.tolist()
             val_seconds = time.perf_counter() - v0
             with torch.no_grad():
                 l2 = float(model.l2())

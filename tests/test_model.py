@@ -106,13 +106,28 @@ def test_pooled_onehot_holds_each_ids_share_of_the_cell() -> None:
 
 def test_nonspatial_features_are_signed_log1p_of_both_frames_and_change() -> None:
     m, batch = _model(SMALL_SCHEMA)
-    v = m.state.pack(batch.arrays)["vectors"]
+    seen: list[torch.Tensor] = []
+    m.state.nonspatial[0].register_forward_hook(lambda mod, inp, out: seen.append(inp[0]))
+    with torch.no_grad():
+        m.state(to_tensors(m.state.pack(batch.arrays)))
+    v = seen[0].numpy()
     player = batch.arrays["player"].astype(float)
-    n = player.shape[-1]
+    n, width = player.shape[-1], v.shape[1] // 3  # player (11) then score_cumulative (13)
     np.testing.assert_allclose(v[:, :n], np.log1p(player[:, 0]), rtol=1e-6)
     delta = player[:, 1] - player[:, 0]
-    np.testing.assert_allclose(v[:, 48:48 + n], np.sign(delta) * np.log1p(np.abs(delta)),
-                               rtol=1e-6)
+    np.testing.assert_allclose(v[:, 2 * width:2 * width + n],
+                               np.sign(delta) * np.log1p(np.abs(delta)), rtol=1e-6)
+
+
+@pytest.mark.parametrize("pool", [1, 2])
+def test_torch_packing_for_a_gpu_equals_numpy_packing(pool: int) -> None:
+    m, batch = _model(Schema.paper(), "onehot", pool=pool)
+    cpu = m.state.pack(batch.arrays)
+    raw = to_tensors({k: batch.arrays[k] for k in m.state.keys()})
+    dev = m.state.pack_torch(raw)
+    assert set(cpu) == set(dev)
+    for k in cpu:
+        np.testing.assert_array_equal(dev[k].numpy(), cpu[k], err_msg=k)
 
 
 def test_forward_gives_one_distance_per_pair_and_l2_skips_biases_and_words() -> None:

@@ -80,7 +80,7 @@ def main() -> None:
     ap.add_argument("--threads", default="1,2", help="torch CPU thread counts to try")
     ap.add_argument("--amp", action="store_true")
     ap.add_argument("--pool", type=int, default=2)
-    ap.add_argument("--categorical", default="embed")
+    ap.add_argument("--categorical", default="onehot")
     ap.add_argument("--epochs", type=int, default=3, help="per run; the first is a warm-up")
     ap.add_argument("--repeats", type=int, default=1)
     args = ap.parse_args()

@@ -148,7 +148,7 @@ class PairLoader:
 
     def __init__(self, packed: PackedSplit, state: np.ndarray, text: np.ndarray,
                  target: np.ndarray, batch_size: int, keys: Sequence[str], shuffle: bool,
-                 seed: int = 0, window: int = 8, prefetch: int = 16,
+                 seed: int = 0, window: int = 4, prefetch: int = 16,
                  transform: Callable[[dict[str, np.ndarray]], Any] | None = None) -> None:
         self.packed, self.keys, self.transform = packed, list(keys), transform
         self.state, self.text, self.target = state, text, target

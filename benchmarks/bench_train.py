@@ -44,8 +44,8 @@ def loader_alone(data: Path, pool: int, categorical: str, passes: int) -> float:
     model = M.MEM(ps.schema, tables, np.zeros((2, 50), np.float32), cfg)
     cuda = torch.cuda.is_available()  # as sc2data train: on a GPU, packing runs on the GPU
     loader = PairLoader(packed, p.state, np.zeros(len(p), np.int64), p.target, 32,
-                        model.state.keys(), True, transform=lambda a: M.to_tensors(a, pin=True)
-                        if cuda else M.to_tensors(model.state.pack(a)))
+                        model.state.keys(), True, transform=None if cuda else model.state.pack,
+                        collate=lambda rows: M.to_tensors(rows, pin=cuda))
     rates = []
     for e in range(passes):
         t0, n = time.perf_counter(), 0

@@ -131,7 +131,8 @@ class SpatialInput(nn.Module):
             lut.append(compact + first[-1])
             sizes.append(n)
         self.sizes = sizes
-        self._lut = np.concatenate(lut).astype(np.int16) if lut else np.zeros(0, np.int16)
+        small = np.uint8 if sum(sizes) <= 256 else np.int16  # one-hot channel ids, compactly
+        self._lut = np.concatenate(lut).astype(small) if lut else np.zeros(0, small)
         self._raw_offsets = np.array(raw_offsets, np.int32)
         self.register_buffer("lut", torch.from_numpy(self._lut.astype(np.int64)), persistent=False)
         self.register_buffer("raw_offsets", torch.from_numpy(self._raw_offsets.astype(np.int64)),
@@ -142,8 +143,9 @@ class SpatialInput(nn.Module):
         self.channels = 2 * (self.cat_width + len(self.scalar_keys))
 
     def pack(self, arrays: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """Stacks by key ``(B, 2, H, W)`` → ``idx`` int16 ``(B, h, w, 2, p²·L)`` (one-hot channel
-        of each pixel of each cell) and ``scalar`` float32 ``(B, h, w, 2, L)`` (cell means)."""
+        """Stacks by key ``(B, 2, H, W)`` → ``idx`` ``(B, h, w, 2, p²·L)`` (the one-hot channel
+        of each pixel of each cell; uint8 when there are ≤ 256 channels) and ``scalar`` float32
+        ``(B, h, w, 2, L)`` (cell means)."""
         out: dict[str, np.ndarray] = {}
         p = self.pool
         for part, keys in (("idx", self.cat_keys), ("scalar", self.scalar_keys)):
@@ -154,7 +156,7 @@ class SpatialInput(nn.Module):
                 raise Sc2DataError(f"{keys[0]} is {h}×{w}, not divisible by the pool size {p}")
             cells = [(dy, dx) for dy in range(p) for dx in range(p)]
             if part == "idx":  # (B, h, w, 2, p·p·L): the one-hot channels of a cell's pixels
-                a = np.empty((b, h // p, w // p, t, len(cells), len(keys)), np.int16)
+                a = np.empty((b, h // p, w // p, t, len(cells), len(keys)), self._lut.dtype)
                 for i, k in enumerate(keys):
                     ch = self._lut[self._raw_offsets[i]:][arrays[k]]
                     for j, (dy, dx) in enumerate(cells):

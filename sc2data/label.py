@@ -333,3 +333,28 @@ def read_labels(folder: Path | str) -> Labels:
         raise Sc2DataError(f"{LABELS_FILE} and {STACKS_FILE} in {folder} come from different "
                            f"runs; rerun sc2data label {folder}")
     return Labels(pq.read_table(Path(folder) / LABELS_FILE), stacks, meta)
+
+
+# -- the dataset door --------------------------------------------------------------------------------
+
+def dataset_source(path: Path | str) -> Source:
+    """A :class:`Source` over the dataset at ``path`` (``sc2data.open_dataset``), one unit per shard."""
+    try:
+        from sc2data import open_dataset  # type: ignore[attr-defined]
+    except ImportError:
+        raise Sc2DataError("this sc2data has no dataset storage (sc2data.open_dataset); "
+                           "install a version with sc2data rollout") from None
+    ds = open_dataset(path)
+    units = [Unit(key=str(path), stacks=len(ds),
+                  batches=lambda bs, keys: ds.iter_batches(bs, keys=list(keys)))]
+    return Source(units, ds.schema, {"path": str(Path(path).resolve())})
+
+
+def label_dataset(data: Path | str, *, include: Sequence[str] | None = None,
+                  exclude: Sequence[str] = (), rules_dir: Path | str | None = None,
+                  batch_size: int = 1024, progress: bool = True) -> LabelSummary:
+    """``sc2data label``: load and select rules, open the dataset, label it into its folder."""
+    from sc2data.registry import load_registry
+
+    rules = load_registry(rules_dir).select(include, exclude)
+    return label(dataset_source(data), rules, data, batch_size=batch_size, progress=progress)

@@ -132,7 +132,7 @@ def label_batches(batches: Batches, rules: Sequence[Registered],
         if n == 0:
             continue
         ep, st = np.asarray(ep), np.asarray(st)
-        where = f"the stacks of episode {ep[0]} step {st[0]} to episode {ep[-1]} step {st[-1]}"
+        where = f"the stacks from episode {ep[0]} step {st[0]} to episode {ep[-1]} step {st[-1]}"
         for col, e in zip(fired, rules):
             col.append(check_output(e.rule, e.source, call(e.rule, e.source, batch, where), n,
                                     where))

@@ -272,8 +272,8 @@ def check_output(rule: Rule, source: str, out: Any, size: int, where: str) -> np
     if not isinstance(out, np.ndarray) or out.shape != (size,) or out.dtype != np.bool_:
         got = (f"{out.dtype} array of shape {out.shape}" if isinstance(out, np.ndarray)
                else type(out).__name__)
-        raise RuleError(f"rule {rule.id!r} from {source} returned {got} on {where} of {size} "
-                        f"stacks; a rule must return a ({size},) bool array")
+        raise RuleError(f"rule {rule.id!r} from {source} returned {got} for {size} stacks "
+                        f"({where}); a rule must return a ({size},) bool array")
     return out
 
 

@@ -125,7 +125,7 @@ BAD = {
         @rule(id="counts", command="count", requires=["player"])
         def f(batch):
             return batch.vector("player", "minerals")[:, 1] - batch.vector("player", "minerals")[:, 0]
-        """, r"rule 'counts' .* returned int32 array of shape \(5,\)"),
+        """, r"rule 'counts' .* returned int32 array of shape \(5,\) for 5 stacks \(a synthetic batch\)"),
     "a_list": ("""
         @rule(id="listy", command="list", requires=["player"])
         def f(batch):

@@ -15,7 +15,7 @@ $(VENV)/.stamp: pyproject.toml
 	touch $@
 
 demo: $(VENV)/.stamp
-	PYTHON=$(PY) bash scripts/demo.sh $(DEMO)
+	SC2DATA=$(BIN)/sc2data bash scripts/demo.sh $(DEMO)
 
 test: $(VENV)/.stamp
 	$(PY) -m pytest -q

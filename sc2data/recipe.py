@@ -1,0 +1,213 @@
+"""Recipes: the one reproducible description of a dataset, from rollout settings to final pairs.
+
+A recipe is a TOML file in ``manifests/``. It is parsed strictly: an unknown key, a value of the
+wrong type or an impossible count is an error that names the field. Example (the paper's dataset)::
+
+    name = "buildmarines-paper"
+    seed = 0
+
+    [rollout]              # what `sc2data rollout` runs
+    env = "sim"
+    agent = "reduced-random"
+    episodes = 600
+    layers = "paper"
+
+    [commands.build_supply_depot]      # one table per command; the id is the rule id
+    text = "build a supply depot"
+    paraphrases = ["construct a supply depot"]   # held out: evaluation only
+
+    [pairs]
+    states_per_command = 10000         # matched pairs per command (and as many mismatched)
+    null_states = 50000                # states no rule fires on, each paired as a mismatch
+    mismatch = "uniform"               # mismatched command: uniform over those not satisfied
+
+    [split]
+    method = "episode"                 # episode-disjoint; "random" reproduces the paper
+    train = 0.6667
+    val = 0.1667
+    test = 0.1666
+"""
+
+from __future__ import annotations
+
+import tomllib
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from sc2data.errors import Sc2DataError
+
+SPLITS: tuple[str, ...] = ("train", "val", "test")
+SPLIT_METHODS: tuple[str, ...] = ("episode", "random")
+MISMATCH_METHODS: tuple[str, ...] = ("uniform",)
+ENVS: tuple[str, ...] = ("sim", "sc2")
+LAYER_SETS: tuple[str, ...] = ("paper", "full")
+
+
+class RecipeError(Sc2DataError):
+    """A malformed recipe; the message names the file and the field."""
+
+
+@dataclass(frozen=True)
+class RolloutSpec:
+    """Rollout settings: which backend and agent play how many episodes."""
+
+    env: str = "sim"
+    agent: str = "reduced-random"
+    episodes: int = 10
+    layers: str = "paper"
+    step_mul: int = 8
+
+
+@dataclass(frozen=True)
+class Command:
+    """A command: the rule that labels it, its canonical text, its held-out paraphrases."""
+
+    id: str
+    text: str
+    paraphrases: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class PairSpec:
+    """How many pairs of each kind, and how mismatches are drawn."""
+
+    states_per_command: int
+    null_states: int
+    mismatch: str = "uniform"
+
+
+@dataclass(frozen=True)
+class SplitSpec:
+    """Train/val/test fractions and how states are assigned to them."""
+
+    method: str = "episode"
+    fractions: tuple[float, float, float] = (2 / 3, 1 / 6, 1 / 6)
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """A parsed, validated recipe."""
+
+    name: str
+    seed: int
+    rollout: RolloutSpec
+    commands: tuple[Command, ...]
+    pairs: PairSpec
+    split: SplitSpec = field(default_factory=SplitSpec)
+    description: str = ""
+    source: str = ""
+    """Path the recipe was read from (not part of its identity)."""
+
+    @property
+    def rule_ids(self) -> tuple[str, ...]:
+        return tuple(c.id for c in self.commands)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able form recorded in every manifest and pair set (``source`` left out)."""
+        d = asdict(self)
+        d.pop("source")
+        return d
+
+
+def _check_keys(where: str, table: Mapping[str, Any], allowed: Mapping[str, type | tuple[type, ...]],
+                required: tuple[str, ...] = ()) -> None:
+    for key, value in table.items():
+        if key not in allowed:
+            raise RecipeError(f"{where}: unknown key {key!r} (allowed: {', '.join(allowed)})")
+        want = allowed[key]
+        # bool is an int in Python; a count given as true/false is still a type error.
+        if not isinstance(value, want) or (isinstance(value, bool) and bool not in
+                                           (want if isinstance(want, tuple) else (want,))):
+            names = " or ".join(t.__name__ for t in (want if isinstance(want, tuple) else (want,)))
+            raise RecipeError(f"{where}.{key} must be {names}, got {type(value).__name__} "
+                              f"{value!r}")
+    for key in required:
+        if key not in table:
+            raise RecipeError(f"{where}: missing required key {key!r}")
+
+
+def _choice(where: str, value: str, choices: tuple[str, ...]) -> str:
+    if value not in choices:
+        raise RecipeError(f"{where} must be one of {', '.join(choices)}; got {value!r}")
+    return value
+
+
+def _positive(where: str, value: int, allow_zero: bool = False) -> int:
+    if value < 0 or (value == 0 and not allow_zero):
+        raise RecipeError(f"{where} must be a {'non-negative' if allow_zero else 'positive'} "
+                          f"integer; got {value}")
+    return value
+
+
+def parse(data: Mapping[str, Any], source: str = "<recipe>") -> Recipe:
+    """Validate a recipe's TOML tables and build a :class:`Recipe`."""
+    w = source
+    _check_keys(w, data, {"name": str, "seed": int, "description": str, "rollout": dict,
+                          "commands": dict, "pairs": dict, "split": dict},
+                required=("name", "seed", "rollout", "commands", "pairs"))
+
+    r = data["rollout"]
+    _check_keys(f"{w} [rollout]", r, {"env": str, "agent": str, "episodes": int, "layers": str,
+                                      "step_mul": int})
+    rollout = RolloutSpec(**r)
+    _choice(f"{w} [rollout].env", rollout.env, ENVS)
+    _choice(f"{w} [rollout].layers", rollout.layers, LAYER_SETS)
+    _positive(f"{w} [rollout].episodes", rollout.episodes)
+    _positive(f"{w} [rollout].step_mul", rollout.step_mul)
+
+    if not data["commands"]:
+        raise RecipeError(f"{w} [commands]: at least one command is needed")
+    commands = []
+    for cid, c in data["commands"].items():
+        where = f"{w} [commands.{cid}]"
+        if not isinstance(c, dict):
+            raise RecipeError(f"{where} must be a table with text = \"...\"")
+        _check_keys(where, c, {"text": str, "paraphrases": list}, required=("text",))
+        paraphrases = c.get("paraphrases", [])
+        if not all(isinstance(p, str) and p.strip() for p in paraphrases):
+            raise RecipeError(f"{where}.paraphrases must be a list of non-empty strings")
+        if not c["text"].strip():
+            raise RecipeError(f"{where}.text must not be empty")
+        commands.append(Command(cid, c["text"], tuple(paraphrases)))
+
+    p = data["pairs"]
+    _check_keys(f"{w} [pairs]", p, {"states_per_command": int, "null_states": int,
+                                    "mismatch": str},
+                required=("states_per_command", "null_states"))
+    pairs = PairSpec(**p)
+    _positive(f"{w} [pairs].states_per_command", pairs.states_per_command)
+    _positive(f"{w} [pairs].null_states", pairs.null_states, allow_zero=True)
+    _choice(f"{w} [pairs].mismatch", pairs.mismatch, MISMATCH_METHODS)
+    if len(commands) < 2:
+        raise RecipeError(f"{w} [commands]: mismatched pairs need at least two commands")
+
+    s = dict(data.get("split", {}))
+    _check_keys(f"{w} [split]", s, {"method": str, "train": (int, float), "val": (int, float),
+                                    "test": (int, float)})
+    method = _choice(f"{w} [split].method", s.pop("method", "episode"), SPLIT_METHODS)
+    fractions = tuple(float(s.get(k, d)) for k, d in zip(SPLITS, SplitSpec().fractions))
+    if any(f <= 0 for f in fractions) or abs(sum(fractions) - 1.0) > 1e-3:
+        raise RecipeError(f"{w} [split]: train, val and test must be positive and sum to 1; "
+                          f"got {', '.join(f'{f:g}' for f in fractions)}")
+    total = sum(fractions)
+    split = SplitSpec(method, tuple(f / total for f in fractions))  # type: ignore[arg-type]
+
+    return Recipe(name=data["name"], seed=data["seed"], rollout=rollout, commands=tuple(commands),
+                  pairs=pairs, split=split, description=data.get("description", ""),
+                  source=source)
+
+
+def load(path: str | Path) -> Recipe:
+    """Read and validate a recipe file."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as e:
+        raise RecipeError(f"cannot read recipe {path}: {e.strerror}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise RecipeError(f"{path} is not valid TOML: {e}") from None
+    return parse(data, str(path))

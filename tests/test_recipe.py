@@ -1,0 +1,86 @@
+"""Recipe parsing: the shipped manifests load; malformed ones fail naming the field."""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from sc2data.recipe import Recipe, RecipeError, load, parse
+
+MANIFESTS = Path(__file__).resolve().parents[1] / "manifests"
+
+BASE: dict[str, Any] = {
+    "name": "t", "seed": 3,
+    "rollout": {"env": "sim", "agent": "reduced-random", "episodes": 4},
+    "commands": {"build_scv": {"text": "build an SCV", "paraphrases": ["make a worker"]},
+                 "train_marine": {"text": "train a marine"}},
+    "pairs": {"states_per_command": 10, "null_states": 5},
+    "split": {"method": "episode", "train": 0.5, "val": 0.25, "test": 0.25},
+}
+
+
+def with_(path: str, value: Any) -> dict[str, Any]:
+    """BASE with one dotted key replaced (or deleted when value is ...)."""
+    d = copy.deepcopy(BASE)
+    *heads, last = path.split(".")
+    t = d
+    for h in heads:
+        t = t[h]
+    if value is ...:
+        del t[last]
+    else:
+        t[last] = value
+    return d
+
+
+@pytest.mark.parametrize("path", sorted(MANIFESTS.glob("*.toml")), ids=lambda p: p.name)
+def test_shipped_manifests_load(path: Path) -> None:
+    recipe = load(path)
+    assert isinstance(recipe, Recipe)
+    assert len(recipe.commands) >= 2
+
+
+def test_parse_reads_every_field() -> None:
+    r = parse(BASE)
+    assert r.seed == 3 and r.rollout.episodes == 4
+    assert r.commands[0].paraphrases == ("make a worker",)
+    assert r.split.fractions == pytest.approx((0.5, 0.25, 0.25))
+    assert r.to_dict()["pairs"]["null_states"] == 5
+
+
+@pytest.mark.parametrize("path,value,message", [
+    ("colour", "red", "unknown key 'colour'"),
+    ("rollout.episodes", "ten", "[rollout].episodes must be int"),
+    ("rollout.episodes", 0, "[rollout].episodes must be a positive integer"),
+    ("rollout.episodes", True, "[rollout].episodes must be int"),
+    ("rollout.env", "sc3", "[rollout].env must be one of sim, sc2"),
+    ("rollout.layers", "most", "[rollout].layers must be one of paper, full"),
+    ("pairs.states_per_command", -5, "[pairs].states_per_command must be a positive integer"),
+    ("pairs.null_states", -1, "[pairs].null_states must be a non-negative integer"),
+    ("pairs.mismatch", "nearest", "[pairs].mismatch must be one of uniform"),
+    ("pairs.states_per_command", ..., "missing required key 'states_per_command'"),
+    ("split.train", 0.9, "must be positive and sum to 1"),
+    ("split.method", "stratified", "[split].method must be one of episode, random"),
+    ("commands.build_scv.text", 5, "[commands.build_scv].text must be str"),
+    ("commands.build_scv.paraphrases", [""], "paraphrases must be a list of non-empty strings"),
+    ("commands", {"build_scv": {"text": "x"}}, "at least two commands"),
+    ("seed", ..., "missing required key 'seed'"),
+])
+def test_malformed_recipe_names_the_field(path: str, value: Any, message: str) -> None:
+    with pytest.raises(RecipeError, match=None) as e:
+        parse(with_(path, value), "r.toml")
+    assert message in str(e.value)
+    assert str(e.value).startswith("r.toml")
+    assert "\n" not in str(e.value)
+
+
+def test_load_reports_bad_toml_and_missing_file(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text("name = \n")
+    with pytest.raises(RecipeError, match="not valid TOML"):
+        load(bad)
+    with pytest.raises(RecipeError, match="cannot read recipe"):
+        load(tmp_path / "absent.toml")

@@ -35,4 +35,4 @@ class BuildSupplyDepot(Rule):
     requires = ("screen/unit_type",)
 
     def __call__(self, batch: StackBatch) -> np.ndarray:
-        return appeared_pixels(batch.layer("screen/unit_type"), DEPOT_TYPES) >= MIN_NEW_PIXELS
+        return appeared_pixels(batch, "screen/unit_type", DEPOT_TYPES) >= MIN_NEW_PIXELS

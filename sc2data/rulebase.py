@@ -21,7 +21,9 @@ Two ways to write one: subclass :class:`Rule`, or decorate a function with :func
 from __future__ import annotations
 
 import re
+import weakref
 from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -126,17 +128,56 @@ def pixel_count(plane: np.ndarray, values: Sequence[int]) -> np.ndarray:
     return count_true(mask).reshape(b, 2)
 
 
-def appeared_pixels(plane: np.ndarray, values: Sequence[int]) -> np.ndarray:
-    """``(B, 2, H, W)`` categorical layer → ``(B,)`` pixels that became one of ``values`` on ground
-    that was empty (value 0) in the previous frame.
+@dataclass(frozen=True)
+class Appeared:
+    """The pixels of a categorical layer that went from empty (0) to some unit between the frames.
+
+    Sparse — a step adds a few dozen such pixels to a 64×64 screen — so every rule that asks
+    about new footprints of some unit types shares one pass over the layer.
+    """
+
+    rows: np.ndarray
+    """Batch row (stack index) of each such pixel."""
+    values: np.ndarray
+    """Its value (unit type id) in the current frame."""
+    size: int
+    """Batch size B."""
+
+    def count(self, values: Sequence[int]) -> np.ndarray:
+        """``(B,)`` how many of each stack's new pixels hold one of ``values``."""
+        return np.bincount(self.rows[is_any(self.values, values)], minlength=self.size)
+
+
+_appeared_cache: weakref.WeakKeyDictionary[StackBatch, dict[str, Appeared]] = \
+    weakref.WeakKeyDictionary()
+
+
+def appeared(batch: StackBatch, key: str) -> Appeared:
+    """The new-on-empty-ground pixels of layer ``key`` (cached per batch: treat batches as
+    read-only once rules have seen them)."""
+    per_batch = _appeared_cache.setdefault(batch, {})
+    if key not in per_batch:
+        plane = batch.layer(key)
+        b = plane.shape[0]
+        hw = int(np.prod(plane.shape[2:]))
+        mask = plane[:, 0] == 0
+        mask &= plane[:, 1] != 0
+        idx = np.flatnonzero(mask)
+        rows = idx // hw
+        values = plane.reshape(b, 2, hw)[rows, 1, idx - rows * hw]
+        per_batch[key] = Appeared(rows, values, b)
+    return per_batch[key]
+
+
+def appeared_pixels(batch: StackBatch, key: str, values: Sequence[int]) -> np.ndarray:
+    """``(B,)`` pixels of layer ``key`` that became one of ``values`` on ground that was empty
+    (value 0) in the previous frame.
 
     A new building appears on empty ground; a unit walking off a building uncovers pixels that were
     the unit's, not empty, so it adds nothing here — which is what makes this robust where a plain
     count of building pixels is not.
     """
-    mask = is_any(plane[:, 1], values)
-    mask &= plane[:, 0] == 0
-    return count_true(mask)
+    return appeared(batch, key).count(values)
 
 
 # -- building stacks by hand (tests, validation, users' own checks) -----------------------------

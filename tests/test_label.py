@@ -34,17 +34,19 @@ def episode_frames(schema: Schema = Schema.paper()) -> list[dict]:
     set_field(f, "player", "idle_worker_count", 1)
     for step in range(STEPS + 1):
         f = {k: v.copy() for k, v in f.items()}
-        p = f["player"]
-        if step in (3, 16):
-            set_field(f, "player", "food_workers", int(p[6]) + 1)
+        if step in (3, 16):  # an SCV is completed: its value appears
+            value = int(f["score_cumulative"][3])
+            set_field(f, "score_cumulative", "total_value_units", value + 50)
         if step == 5 and "screen/unit_type" in f:
             paint_disk(f, "screen/unit_type", (40, 12), 1.125 * SCREEN_PX_PER_UNIT,
                        int(units.Terran.SupplyDepot))
         if step == 8 and "screen/unit_type" in f:
             paint_disk(f, "screen/unit_type", (40, 30), 1.8125 * SCREEN_PX_PER_UNIT,
                        int(units.Terran.Barracks))
-        if step in (11, 16):
+        if step in (11, 16):  # a marine is completed: BuildMarines' score and the value rise
             set_field(f, "score_cumulative", "score", int(f["score_cumulative"][0]) + 1)
+            value = int(f["score_cumulative"][3])
+            set_field(f, "score_cumulative", "total_value_units", value + 50)
         if step == 14:
             set_field(f, "player", "idle_worker_count", 0)
         frames.append(f)

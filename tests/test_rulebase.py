@@ -8,7 +8,7 @@ import pytest
 from sc2data.rulebase import (RULE_ID, FunctionRule, Rule, appeared_pixels, blank_frame, change,
                               count_true, fell, is_schema_key, paint_disk, pixel_count, rose, rule,
                               schema_for, set_field, stack, synthetic_batch)
-from sc2data.schema import MissingLayerError, Schema
+from sc2data.schema import MissingLayerError, Schema, StackBatch
 
 
 def test_rose_fell_change() -> None:
@@ -32,10 +32,24 @@ def test_pixel_count_and_appeared_pixels() -> None:
     prev["screen/unit_type"][0:2, 0:2] = 48   # a marine...
     prev["screen/unit_type"][0:5, 0:5][2:, 2:] = 19
     cur["screen/unit_type"][0:5, 0:5] = 19     # ...left; a depot grew over empty ground
-    layer = stack([(prev, cur)]).layer("screen/unit_type")
-    assert pixel_count(layer, [19]).tolist() == [[9, 25]]
-    assert pixel_count(layer, [19, 48]).tolist() == [[13, 25]]
-    assert appeared_pixels(layer, [19]).tolist() == [25 - 9 - 4]
+    batch = stack([(prev, cur), (cur, prev)])
+    layer = batch.layer("screen/unit_type")
+    assert pixel_count(layer, [19]).tolist() == [[9, 25], [25, 9]]
+    assert pixel_count(layer, [19, 48]).tolist() == [[13, 25], [25, 13]]
+    assert appeared_pixels(batch, "screen/unit_type", [19]).tolist() == [25 - 9 - 4, 0]
+    assert appeared_pixels(batch, "screen/unit_type", [48]).tolist() == [0, 0]
+
+
+def test_appeared_pixels_matches_the_dense_definition() -> None:
+    rng = np.random.default_rng(7)
+    plane = rng.choice(np.array([0, 0, 0, 19, 21, 45, 47, 48], np.uint16), (9, 2, 64, 64))
+    batch = StackBatch({"screen/unit_type": plane}, Schema.from_names(["unit_type"], []))
+    for values in ([19, 47], [21], [45, 48, 19]):
+        dense = (np.isin(plane[:, 1], values) & (plane[:, 0] == 0)).reshape(9, -1).sum(axis=1)
+        assert appeared_pixels(batch, "screen/unit_type", values).tolist() == dense.tolist()
+    other = StackBatch({"screen/unit_type": plane[::-1].copy()}, batch.schema)
+    dense = (np.isin(plane[::-1, 1], [21]) & (plane[::-1, 0] == 0)).reshape(9, -1).sum(axis=1)
+    assert appeared_pixels(other, "screen/unit_type", [21]).tolist() == dense.tolist()
 
 
 def test_paint_disk_sizes_match_the_real_game() -> None:

@@ -1,0 +1,124 @@
+"""Labelling throughput, stacks per second on one core: the rules alone, and end to end.
+
+* rules only — every built-in rule (with the labeller's shape/dtype checks) over in-memory
+  batches of real stacks: one simulator episode per agent, tiled to ``--stacks``;
+* end to end — ``sc2data.label.label_dataset`` on a dataset rolled out with ``sc2data rollout``
+  (``--data DIR``), reading only the keys the rules require, writing the Parquet files.
+
+Prints the median of ``--repeats`` runs. Usage::
+
+    OMP_NUM_THREADS=1 python benchmarks/bench_label.py [--stacks 200000] [--data DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from sc2data.label import label_batches
+from sc2data.registry import load_registry
+from sc2data.schema import Schema, StackBatch
+
+
+def episode_stacks(agent_name: str, seed: int, keys: set[str]) -> dict[str, np.ndarray]:
+    """All stacks of one simulator episode, only ``keys``, as ``(N, 2, …)`` arrays."""
+    from sc2data.agents import make_agent
+    from sc2data.env import make_env
+
+    schema = Schema.paper()
+    env = make_env("sim", seed=seed)
+    agent = make_agent(agent_name, seed=seed)
+    agent.setup(env.observation_spec()[0], env.action_spec()[0])
+    ts = env.reset()[0]
+    agent.reset()
+    frames = []
+    while True:
+        frames.append({k: a for k, a in schema.extract(ts.observation).items() if k in keys})
+        if ts.last():
+            break
+        ts = env.step([agent.step(ts)])[0]
+    return {k: np.stack([np.stack([p[k], c[k]]) for p, c in zip(frames[:-1], frames[1:])])
+            for k in keys}
+
+
+def rules_only(stacks: int, batch_size: int, repeats: int) -> None:
+    rules = list(load_registry())
+    keys = {k for e in rules for k in e.rule.requires}
+    parts = [episode_stacks(a, 0, keys) for a in ("reduced-random", "scripted")]
+    base = {k: np.concatenate([p[k] for p in parts]) for k in keys}
+    n = len(next(iter(base.values())))
+    reps = -(-stacks // n)
+    arrays = {k: np.concatenate([a] * reps)[:stacks] for k, a in base.items()}
+    schema = Schema.paper()
+
+    def batches() -> list[tuple[np.ndarray, np.ndarray, StackBatch]]:
+        """Fresh batch objects (views): nothing cached from an earlier repeat."""
+        out = []
+        for i in range(0, stacks, batch_size):
+            b = StackBatch({k: a[i:i + batch_size] for k, a in arrays.items()}, schema)
+            out.append((np.zeros(len(b), np.int64), np.arange(i, i + len(b)), b))
+        return out
+
+    times = []
+    for _ in range(repeats):
+        todo = batches()
+        t0 = time.perf_counter()
+        table = label_batches(todo, rules)
+        times.append(time.perf_counter() - t0)
+    fired = {e.id: int(np.count_nonzero(table.column(e.id).to_numpy())) for e in rules}
+    med = statistics.median(times)
+    print(f"rules only: {len(rules)} rules, {stacks:,} stacks in batches of {batch_size}: "
+          f"median {med:.3f} s of {repeats} = {stacks / med:,.0f} stacks/s")
+    print(f"  fired: {fired}")
+    for e in rules:
+        one = []
+        for _ in range(repeats):
+            todo = batches()
+            t0 = time.perf_counter()
+            for _, _, b in todo:
+                e.rule(b)
+            one.append(time.perf_counter() - t0)
+        print(f"  {e.id:20s} {stacks / statistics.median(one):>12,.0f} stacks/s alone")
+
+
+def end_to_end(data: Path, batch_size: int, repeats: int) -> None:
+    from sc2data.label import LABELS_FILE, STACKS_FILE, label_dataset
+
+    times = []
+    for _ in range(repeats):
+        for name in (LABELS_FILE, STACKS_FILE):
+            (data / name).unlink(missing_ok=True)
+        t0 = time.perf_counter()
+        summary = label_dataset(data, batch_size=batch_size, progress=False)
+        times.append(time.perf_counter() - t0)
+    med = statistics.median(times)
+    print(f"end to end: {summary.stacks:,} stacks from {data}: median {med:.3f} s of {repeats} "
+          f"= {summary.stacks / med:,.0f} stacks/s")
+    print(summary.table())
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--stacks", type=int, default=200_000)
+    ap.add_argument("--batch-size", type=int, default=1024)
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--data", type=Path, help="a rolled-out dataset folder (copied first)")
+    args = ap.parse_args()
+    print(f"OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', 'unset')}, "
+          f"cpus={os.cpu_count()}")
+    rules_only(args.stacks, args.batch_size, args.repeats)
+    if args.data is not None:
+        with tempfile.TemporaryDirectory() as tmp:
+            copy = Path(shutil.copytree(args.data, Path(tmp) / "data"))
+            end_to_end(copy, args.batch_size, args.repeats)
+
+
+if __name__ == "__main__":
+    main()

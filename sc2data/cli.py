@@ -73,6 +73,21 @@ def label(
     typer.echo(summary.table())
 
 
+@app.command()
+def render(
+    out: str = typer.Option(..., "--out", help="PNG file to write."),
+    env: str = typer.Option("sim", "--env", help="Backend: sim (embedded) or sc2 (real game)."),
+    seed: int = typer.Option(0, "--seed", help="Seed for the environment and the agent."),
+    steps: int = typer.Option(300, "--steps", help="Agent steps to play before the frame."),
+    agent: str = typer.Option("scripted", "--agent", help="Agent: random, reduced-random, scripted."),
+) -> None:
+    """Play N steps and draw that frame's 27 screen and 11 minimap layers, coloured as pysc2 does."""
+    from sc2data.render import render_episode
+
+    path = render_episode(out, env=env, seed=seed, steps=steps, agent=agent)
+    typer.echo(f"wrote {path}")
+
+
 def main(argv: list[str] | None = None) -> None:
     """Console entry point: user errors become one line on stderr and exit status 2."""
     command = typer.main.get_command(app)

@@ -1,0 +1,142 @@
+"""Reading one pysc2 observation the way a scripted agent needs: units, selection, free ground.
+
+Only what pysc2 gives an agent is used (screen layers, ``player``, ``single_select``,
+``build_queue``, ``available_actions``), so the same reading works on the simulator and the real
+game. Pixels are numpy ``[y, x]``; the points handed to pysc2 are ``(x, y)``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from sc2data._pysc2 import actions, features, units
+
+CAMERA_WIDTH = 24.0
+"""World units across the feature screen (pysc2's default ``camera_width_world_units``)."""
+
+MINERAL_TYPES: tuple[int, ...] = tuple(int(u) for u in units.Neutral if "MineralField" in u.name)
+MOBILE_TYPES: tuple[int, ...] = (int(units.Terran.SCV), int(units.Terran.Marine))
+"""Our ground units: the game pushes them aside for a new building, so they never block one."""
+
+_S = features.SCREEN_FEATURES
+_SELF = features.PlayerRelative.SELF
+
+
+def _rows(a: Any) -> np.ndarray:
+    """A (n, 7) unit table without pysc2's all-zero padding rows."""
+    a = np.asarray(a).reshape(-1, len(features.UnitLayer))
+    return a[a[:, 0] != 0]
+
+
+class ScreenView:
+    """One observation, parsed once per agent step."""
+
+    def __init__(self, timestep: Any) -> None:
+        o = timestep.observation
+        screen = o["feature_screen"]
+        self.unit_type = np.asarray(screen[_S.unit_type.index])
+        self.player_relative = np.asarray(screen[_S.player_relative.index])
+        self.buildable = np.asarray(screen[_S.buildable.index]) > 0
+        self.player = np.asarray(o["player"])
+        self.available = frozenset(int(a) for a in np.asarray(o["available_actions"]))
+        self.single_select = _rows(o["single_select"])
+        self.multi_select = _rows(o["multi_select"])
+        self.build_queue = _rows(o["build_queue"])
+        self.px_per_unit = self.unit_type.shape[1] / CAMERA_WIDTH
+        self._placements: dict[int, np.ndarray] = {}
+
+    def can(self, call: actions.FunctionCall) -> bool:
+        """Whether pysc2 lists the call's function as available now."""
+        return int(call.function) in self.available
+
+    def selected_type(self) -> int:
+        """Unit type of the single selected unit; 0 when none or several are selected."""
+        if len(self.single_select) == 1 and len(self.multi_select) == 0:
+            return int(self.single_select[0, 0])
+        return 0
+
+    # --- masks ---
+
+    def own(self, *unit_types: int) -> np.ndarray:
+        """Pixels showing one of our units of the given types."""
+        return np.isin(self.unit_type, unit_types) & (self.player_relative == _SELF)
+
+    def minerals(self) -> np.ndarray:
+        return np.isin(self.unit_type, MINERAL_TYPES)
+
+    def placements(self, size: int) -> np.ndarray:
+        """Pixels where a ``size``×``size`` building can be centred on free, buildable ground.
+
+        The footprint is widened by half a world unit for the game's snapping of the centre to its
+        grid; pixels off the screen count as blocked, and so do structures and minerals, but not
+        our SCVs and marines, which the game pushes aside.
+        """
+        if size not in self._placements:
+            r = (size / 2 + 0.5) * self.px_per_unit
+            h = max(0, math.ceil(r - 0.5))
+            blocked = ~self.buildable | ((self.unit_type != 0)
+                                         & ~np.isin(self.unit_type, MOBILE_TYPES))
+            self._placements[size] = _box_clear(blocked, h)
+        return self._placements[size]
+
+    @staticmethod
+    def blobs(mask: np.ndarray) -> list[np.ndarray]:
+        """The 4-connected components of a mask, each as its own mask, in raster order."""
+        if not mask.any():
+            return []
+        big = mask.size
+        label = np.where(mask, np.arange(mask.size).reshape(mask.shape), big)
+        while True:  # propagate the smallest index through each component
+            new = label.copy()
+            np.minimum(new[1:], label[:-1], out=new[1:])
+            np.minimum(new[:-1], label[1:], out=new[:-1])
+            np.minimum(new[:, 1:], label[:, :-1], out=new[:, 1:])
+            np.minimum(new[:, :-1], label[:, 1:], out=new[:, :-1])
+            new[~mask] = big
+            if np.array_equal(new, label):
+                break
+            label = new
+        return [label == i for i in np.unique(label[mask])]
+
+    # --- picking a pixel, as an (x, y) screen point ---
+
+    @staticmethod
+    def centre_pixel(mask: np.ndarray) -> tuple[int, int] | None:
+        """The pixel of the mask nearest its centroid (inside the unit, unlike the centroid)."""
+        ys, xs = np.nonzero(mask)
+        if len(ys) == 0:
+            return None
+        i = int(np.argmin((ys - ys.mean()) ** 2 + (xs - xs.mean()) ** 2))
+        return int(xs[i]), int(ys[i])
+
+    @staticmethod
+    def random_pixel(mask: np.ndarray, rng: np.random.Generator) -> tuple[int, int] | None:
+        ys, xs = np.nonzero(mask)
+        if len(ys) == 0:
+            return None
+        i = int(rng.integers(len(ys)))
+        return int(xs[i]), int(ys[i])
+
+    @staticmethod
+    def nearest_pixel(mask: np.ndarray, xy: tuple[int, int] | None) -> tuple[int, int] | None:
+        ys, xs = np.nonzero(mask)
+        if len(ys) == 0:
+            return None
+        if xy is None:
+            return int(xs[0]), int(ys[0])
+        i = int(np.argmin((xs - xy[0]) ** 2 + (ys - xy[1]) ** 2))
+        return int(xs[i]), int(ys[i])
+
+
+def _box_clear(blocked: np.ndarray, h: int) -> np.ndarray:
+    """Pixels whose (2h+1)² neighbourhood holds no blocked pixel (off-screen counts as blocked)."""
+    pad = np.pad(blocked.astype(np.int32), h, constant_values=1)
+    ii = np.zeros((pad.shape[0] + 1, pad.shape[1] + 1), np.int32)
+    ii[1:, 1:] = pad.cumsum(0).cumsum(1)
+    n = 2 * h + 1
+    rows, cols = blocked.shape
+    box = ii[n:n + rows, n:n + cols] - ii[:rows, n:n + cols] - ii[n:n + rows, :cols] + ii[:rows, :cols]
+    return box == 0

@@ -1,0 +1,259 @@
+"""Drawing the 27 screen and 11 minimap feature layers, and assembling pysc2's observation.
+
+Units are filled disks of radius ``unit radius × px per unit`` sampled at pixel centres (brief
+§3), structures under ground units. A frame is drawn as one "top unit" image (which unit is on
+top at each pixel); every per-unit layer is then a lookup ``table[top]``. Structures and mineral
+fields never move, so their pixels are stamped once per change of the footprint grid; only
+ground units are stamped every frame, all in one vectorised pass.
+
+Layer by layer (pysc2 names): ``height_map`` a flat plateau (:data:`~mapdata.HEIGHT_VALUE`)
+inside the playable area, 0 outside; ``visibility_map`` 2 (visible: the map turns fog off)
+inside, 0 outside; ``creep``, ``power``, ``unit_energy(_ratio)``, ``unit_shields(_ratio)``,
+``effects``, ``hallucinations``, ``cloaked``, ``blip``, ``buffs``, ``buff_duration``,
+``active``, ``placeholder`` and the minimap ``alerts`` are 0, as a Terran-only map without
+effects, buffs or enemies gives; ``player_id`` 1 for us, 16 for the neutral mineral fields;
+``player_relative`` SELF 1 / NEUTRAL 3; ``unit_hit_points`` hit points, ``..._ratio`` hit
+points / max × 255 (0 for mineral fields, which have none); ``unit_density`` the number of unit
+disks covering a pixel, ``unit_density_aa`` 16 × the covered fraction summed over units
+(pysc2's docs: "a maximum of 16 per unit per pixel", up to 255), the fraction approximated by
+``clip(R + ½ − distance, 0, 1)``; ``build_progress`` progress × 255 for a structure under
+construction, 0 otherwise; ``pathable``/``buildable`` the playable ground less every
+structure's and mineral field's footprint. The minimap draws the whole 64×64 map at one pixel
+per world unit (pysc2's transform with ``crop_to_playable_area=False``): structures as disks at
+least 1 px in radius, each SCV or marine (smaller than a pixel) on the pixel it stands in; and
+``camera`` marks the screen's world rectangle. Only the 7 minimap layers of unit and terrain
+meaning are drawn from units (no density layers exist on the minimap).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sc2data._pysc2 import features
+from sc2data.sim import mapdata as md
+from sc2data.sim.game import Game
+
+S = features.SCREEN_FEATURES
+M = features.MINIMAP_FEATURES
+_UNIT_SCREEN = [S.player_id.index, S.player_relative.index, S.unit_type.index,
+                S.selected.index, S.unit_hit_points.index, S.unit_hit_points_ratio.index,
+                S.build_progress.index]
+_UNIT_MINIMAP = [M.player_id.index, M.player_relative.index, M.unit_type.index,
+                 M.selected.index]
+_N = md.SCREEN
+_NM = md.MINIMAP
+MINIMAP_MIN_RADIUS = 1.0
+"""Smallest drawn minimap radius of a structure in pixels; ground units (0.375 world units,
+smaller than a minimap pixel) mark the one pixel they stand in."""
+
+
+def stamp(cx: np.ndarray, cy: np.ndarray, radius: float, size: int
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Pixels of disks of ``radius`` px centred at (cx, cy) on a ``size``² image (exact).
+
+    Returns (unit index, flat pixel, inside-disk flag, anti-aliased coverage in [0, 1]) for every
+    pixel with non-zero coverage; the disk itself is the pixels whose centres lie within
+    ``radius``. Used for the few static structures; moving units use :class:`DiskStamp`.
+    """
+    w = int(2 * radius + 1) + 2
+    x0 = np.floor(cx - radius - 0.5).astype(np.int64)
+    y0 = np.floor(cy - radius - 0.5).astype(np.int64)
+    o = np.arange(w)
+    px = x0[:, None] + o
+    py = y0[:, None] + o
+    dx = px + 0.5 - cx[:, None]
+    dy = py + 0.5 - cy[:, None]
+    d2 = dy[:, :, None] ** 2 + dx[:, None, :] ** 2
+    cov = np.clip(radius + 0.5 - np.sqrt(d2), 0.0, 1.0)
+    keep = (cov > 0) & ((px >= 0) & (px < size))[:, None, :] & ((py >= 0) & (py < size))[:, :, None]
+    n, i, j = np.nonzero(keep)
+    flat = (y0[n] + i) * size + (x0[n] + j)
+    return n, flat, d2[keep] <= radius * radius, cov[keep]
+
+
+class DiskStamp:
+    """Disk pixels of one radius for many moving units, from precomputed sub-pixel tables.
+
+    A unit's centre is split into a whole pixel and a sub-pixel offset quantised to 1/16 px
+    (0.02 world units on the screen); for each of the 16×16 offsets the disk mask and coverage
+    of the surrounding window are tabulated once, so a frame costs a few array operations
+    whatever the number of units.
+    """
+
+    Q = 16
+
+    def __init__(self, radius: float, size: int) -> None:
+        self.radius = radius
+        self.size = size
+        w = int(2 * radius + 1) + 2
+        o = np.arange(w)
+        q = (np.arange(self.Q) + 0.5) / self.Q
+        d1 = o[None, :] - radius - q[:, None]  # (Q, w): pixel centre − unit centre
+        d2 = d1[:, None, :, None] ** 2 + d1[None, :, None, :] ** 2  # (Qy, Qx, wy, wx)
+        d2 = d2.reshape(self.Q * self.Q, w * w)
+        self.disk = d2 <= radius * radius
+        self.cov = np.clip(radius + 0.5 - np.sqrt(d2), 0.0, 1.0)
+        oy, ox = np.divmod(np.arange(w * w), w)
+        self.ox, self.oy = ox, oy
+        self.sentinel = size * size
+
+    def __call__(self, cx: np.ndarray, cy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(flat disk pixel or sentinel, flat covered pixel or sentinel, coverage), each (N, w²)."""
+        bx = cx - (self.radius + 0.5)
+        by = cy - (self.radius + 0.5)
+        fx = np.floor(bx)
+        fy = np.floor(by)
+        v = ((by - fy) * self.Q).astype(np.intp) * self.Q + ((bx - fx) * self.Q).astype(np.intp)
+        x = fx.astype(np.intp)[:, None] + self.ox
+        y = fy.astype(np.intp)[:, None] + self.oy
+        size = self.size
+        inb = (x.view(np.uintp) < size) & (y.view(np.uintp) < size)
+        flat = y * size + x
+        fa = np.where(inb, flat, self.sentinel)
+        fd = np.where(self.disk[v], fa, self.sentinel)
+        return fd, fa, self.cov[v]
+
+
+class _Layer:
+    """The stamped pixels of a set of units on one image (screen or minimap).
+
+    ``top`` has one extra sentinel entry at the end for pixels that fall off the image.
+    """
+
+    def __init__(self, size: int) -> None:
+        self.size = size
+        self.top = np.zeros(size * size + 1, dtype=np.intp)
+        self.density = np.zeros(size * size, dtype=np.int64)
+        self.aa = np.zeros(size * size, dtype=np.float64)
+
+
+class Renderer:
+    """Draws a :class:`Game` into pysc2-shaped feature arrays."""
+
+    def __init__(self) -> None:
+        playable = md.playable_cells()
+        srows, scols = md.screen_pixel_cells()
+        mrows, mcols = md.minimap_pixel_cells()
+        self._sidx = (srows[:, None], scols[None, :])
+        self._midx = (mrows[:, None], mcols[None, :])
+        c = np.arange(_N) + 0.5
+        wx = md.SCREEN_X0 + c / md.PX_PER_UNIT
+        wy = md.SCREEN_Y0 - c / md.PX_PER_UNIT
+        x0, y0, x1, y1 = md.PLAYABLE
+        s_play = ((wy >= y0) & (wy <= y1))[:, None] & ((wx >= x0) & (wx <= x1))[None, :]
+        cm = (np.arange(_NM) + 0.5) * md.MAP_SIZE / _NM
+        m_play = ((md.MAP_SIZE - cm >= y0) & (md.MAP_SIZE - cm <= y1))[:, None] & \
+            ((cm >= x0) & (cm <= x1))[None, :]
+        self._playable = playable
+        self.screen_base = np.zeros((len(S), _N, _N), dtype=np.int32)
+        self.screen_base[S.height_map.index] = np.where(s_play, md.HEIGHT_VALUE, 0)
+        self.screen_base[S.visibility_map.index] = np.where(s_play, 2, 0)
+        self.minimap_base = np.zeros((len(M), _NM, _NM), dtype=np.int32)
+        self.minimap_base[M.height_map.index] = np.where(m_play, md.HEIGHT_VALUE, 0)
+        self.minimap_base[M.visibility_map.index] = np.where(m_play, 2, 0)
+        self.minimap_base[M.camera.index] = md.camera_minimap_mask()
+        self._version = -1
+        self._s_static = _Layer(_N)
+        self._m_static = _Layer(_NM)
+        small = md.UNIT_DATA[md.SCV].radius  # every ground unit here: SCV and Marine, 0.375
+        self._s_disk = DiskStamp(small * md.PX_PER_UNIT, _N)
+        self._attr = np.zeros((7, 1), dtype=np.int32)
+        self.hp = np.zeros(0)
+        self.progress = np.zeros(0)
+
+    # ------------------------------------------------------------------ static part
+
+    def _refresh_static(self, g: Game) -> None:
+        """Re-stamp structures and mineral fields and the grids, after a footprint changed."""
+        self._version = g.grid_version
+        free = self._playable & ~g.occupied
+        for base, idx, name in ((self.screen_base, self._sidx, S),
+                                (self.minimap_base, self._midx, M)):
+            grid = free[idx].astype(np.int32)
+            base[name.pathable.index] = grid
+            base[name.buildable.index] = grid
+        tab = g.table
+        slots = np.flatnonzero(tab.alive & (tab.layer == 0))
+        slots = slots[np.argsort(tab.tag[slots], kind="stable")]
+        for layer, to_px, scale, rmin in ((self._s_static, md.world_to_screen, md.PX_PER_UNIT, 0.0),
+                                          (self._m_static, md.world_to_minimap, _NM / md.MAP_SIZE,
+                                           MINIMAP_MIN_RADIUS)):
+            layer.top[:] = 0
+            layer.density[:] = 0
+            layer.aa[:] = 0.0
+            for s in slots:
+                cx, cy = to_px(tab.x1[s], tab.y1[s])
+                r = max(tab.radius[s] * scale, rmin)
+                _, flat, disk, cov = stamp(np.array([cx]), np.array([cy]), r, layer.size)
+                layer.top[flat[disk]] = s + 1
+                layer.density += np.bincount(flat[disk], minlength=layer.size ** 2)
+                layer.aa += np.bincount(flat, weights=cov, minlength=layer.size ** 2)
+
+    # ------------------------------------------------------------------ frame
+
+    @staticmethod
+    def _compose(static: _Layer, disk: DiskStamp, slots: np.ndarray, cx: np.ndarray,
+                 cy: np.ndarray, want_density: bool
+                 ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """Top-unit image (slot + 1), and density and coverage if wanted, of static + ground."""
+        n = static.size * static.size
+        fd, fa, cov = disk(cx, cy)
+        top = static.top.copy()
+        # Later (higher-tag) units overwrite earlier ones: numpy assigns repeated indices in
+        # order, and the sentinel pixel n takes what falls outside the disk or the image.
+        top[fd.ravel()] = np.repeat(slots + 1, fd.shape[1])
+        top = top[:n]
+        if not want_density:
+            return top, None, None
+        density = static.density + np.bincount(fd.ravel(), minlength=n + 1)[:n]
+        aa = static.aa + np.bincount(fa.ravel(), weights=cov.ravel(), minlength=n + 1)[:n]
+        return top, density, aa
+
+    def _attributes(self, g: Game, t: float) -> np.ndarray:
+        """The table's per-slot layer values with hit points, ratio and progress at ``t``."""
+        tab = g.table
+        prog = np.minimum(tab.prog0 + tab.prate * (t - tab.pt0), 1.0)
+        hp = np.maximum(tab.hpmax * (0.1 + 0.9 * prog) - tab.dmg, 0.0)
+        a = tab.attr
+        a[4, 1:] = hp
+        a[5, 1:] = hp * tab.ratio_k
+        a[6, 1:] = (prog < 1.0) * (prog * 255.0)
+        self.hp, self.progress = hp, prog
+        return a
+
+    def _minimap_top(self, slots: np.ndarray, wx: np.ndarray, wy: np.ndarray) -> np.ndarray:
+        """Minimap top-unit image: structures stamped, each ground unit on the pixel it is in."""
+        n = _NM * _NM
+        ms = _NM / md.MAP_SIZE
+        px = (wx * ms).astype(np.intp)
+        py = ((md.MAP_SIZE - wy) * ms).astype(np.intp)
+        flat = np.where((px.view(np.uintp) < _NM) & (py.view(np.uintp) < _NM), py * _NM + px, n)
+        top = self._m_static.top.copy()
+        top[flat] = slots + 1
+        return top[:n]
+
+    def draw(self, g: Game) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(feature_screen, feature_minimap, top-unit image) at the game's current loop."""
+        if self._version != g.grid_version:
+            self._refresh_static(g)
+        t = float(g.loop)
+        slots = g.table.ground()
+        wx, wy = g.table.positions(slots, t)
+        attr = self._attributes(g, t)
+
+        sx = (wx - md.SCREEN_X0) * md.PX_PER_UNIT
+        sy = (md.SCREEN_Y0 - wy) * md.PX_PER_UNIT
+        top, density, aa = self._compose(self._s_static, self._s_disk, slots, sx, sy, True)
+        screen = self.screen_base.copy()
+        flat = screen.reshape(len(S), _N * _N)
+        for row, layer in enumerate(_UNIT_SCREEN):
+            attr[row].take(top, out=flat[layer], mode="clip")
+        flat[S.unit_density.index] = density
+        flat[S.unit_density_aa.index] = np.minimum(aa * 16.0 + 0.5, 255.0)
+
+        mtop = self._minimap_top(slots, wx, wy)
+        minimap = self.minimap_base.copy()
+        mflat = minimap.reshape(len(M), _NM * _NM)
+        for row, layer in enumerate(_UNIT_MINIMAP):
+            attr[row].take(mtop, out=mflat[layer], mode="clip")
+        return screen, minimap, top.reshape(_N, _N)

@@ -8,12 +8,15 @@ Why not "collected minerals rose": twelve or more SCVs deliver all the time on B
 that fires on about half of all stacks and would leave no null states. Sending idle workers back to
 the minerals is the player's decision the command names, and it is a minority event.
 
-Known limit, measured: an idle SCV sent to *build* looks the same on a two-frame stack — it leaves
-the idle count at once, and the building's cost is only paid when it arrives, steps later. Against
-the simulator's record of idle SCVs sent to mine ("gathered") the rule's recall is 100% but its
-precision is about 90% with the reduced random agent, whose build macro prefers idle SCVs; against
-"an idle SCV was given work" it is exact. The direction the SCV walks is the only difference, and
-over one step (≈4 px) it does not separate the two reliably.
+Known limits, measured on simulator rollouts (tests/rules/test_sim_agreement.py): a two-frame
+stack cannot tell an idle SCV sent to *build* from one sent to mine — both leave the idle count at
+once, and a building's cost is only paid when the SCV arrives, steps later — and an SCV going idle
+(its building done) in the very step another is sent to mine keeps the count level. Against the
+simulator's record of idle SCVs sent to mine ("gathered"), with the reduced random agent (whose
+build macro prefers idle SCVs), precision is 85–92% and recall about 96%; against what the stack
+can show — "an idle SCV was given work", on steps where no SCV went idle — both are 100%. The
+direction the SCV walks is the only other difference, and over one step (≈4 px) it does not
+separate the two reliably.
 """
 
 from __future__ import annotations

@@ -140,9 +140,10 @@ def label_batches(batches: Batches, rules: Sequence[Registered],
         steps.append(st)
         if on_batch is not None:
             on_batch(n)
-    cols: dict[str, Any] = {
-        "episode": np.concatenate(episodes) if episodes else np.zeros(0, np.int64),
-        "step": np.concatenate(steps) if steps else np.zeros(0, np.int64),
+    episode = np.concatenate(episodes) if episodes else np.zeros(0, np.int64)
+    cols: dict[str, Any] = {  # the pair stage's types: int64 episode ids, int32 steps
+        "episode": episode.astype(np.int64) if episode.dtype.kind in "iu" else episode,
+        "step": (np.concatenate(steps) if steps else np.zeros(0)).astype(np.int32),
     }
     for col, e in zip(fired, rules):
         cols[e.id] = np.concatenate(col) if col else np.zeros(0, bool)
@@ -338,16 +339,39 @@ def read_labels(folder: Path | str) -> Labels:
 # -- the dataset door --------------------------------------------------------------------------------
 
 def dataset_source(path: Path | str) -> Source:
-    """A :class:`Source` over the dataset at ``path`` (``sc2data.open_dataset``), one unit per shard."""
-    try:
-        from sc2data import open_dataset  # type: ignore[attr-defined]
-    except ImportError:
-        raise Sc2DataError("this sc2data has no dataset storage (sc2data.open_dataset); "
-                           "install a version with sc2data rollout") from None
+    """A :class:`Source` over the rolled-out dataset at ``path``: one unit per shard, keyed by the
+    shard's name and sha256 (a re-rolled shard is relabelled), reading only the keys asked for."""
+    from sc2data import open_dataset
+
     ds = open_dataset(path)
-    units = [Unit(key=str(path), stacks=len(ds),
-                  batches=lambda bs, keys: ds.iter_batches(bs, keys=list(keys)))]
-    return Source(units, ds.schema, {"path": str(Path(path).resolve())})
+    index = ds.index.to_pydict()
+    shards: dict[str, dict[str, Any]] = {}
+    for shard, sha, episode, n in zip(index["shard"], index["shard_sha256"], index["episode"],
+                                      index["n_steps"]):
+        entry = shards.setdefault(shard, {"sha256": sha, "episodes": []})
+        entry["episodes"].append((int(episode), int(n)))
+
+    def reader(episodes: list[tuple[int, int]]) -> Callable[[int, Sequence[str]], Batches]:
+        ep = np.concatenate([np.full(n, e, np.int64) for e, n in episodes]) if episodes else \
+            np.zeros(0, np.int64)
+        st = np.concatenate([np.arange(n, dtype=np.int64) for _, n in episodes]) if episodes \
+            else np.zeros(0, np.int64)
+
+        def batches(batch_size: int, keys: Sequence[str]) -> Batches:
+            for i in range(0, len(ep), batch_size):
+                e, s = ep[i:i + batch_size], st[i:i + batch_size]
+                yield e, s, ds.read(e, s, keys)
+        return batches
+
+    units = [Unit(key=f"{name}:{info['sha256']}", stacks=sum(n for _, n in info["episodes"]),
+                  batches=reader(sorted(info["episodes"])))
+             for name, info in sorted(shards.items())]
+    fingerprint = hashlib.sha256(json.dumps(
+        [ds.schema.to_dict(), sorted((u.key for u in units))]).encode()).hexdigest()
+    info = {"path": str(Path(path).resolve()), "fingerprint": fingerprint,
+            "episodes": int(len(ds.episode_ids)), "stacks": len(ds),
+            "settings": ds.settings, "schema": ds.schema.to_dict()}
+    return Source(units, ds.schema, info)
 
 
 def label_dataset(data: Path | str, *, include: Sequence[str] | None = None,

@@ -3,6 +3,8 @@ nothing half-written — on hand-built episodes with events at known steps."""
 
 from __future__ import annotations
 
+import re
+import shutil
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -222,3 +224,126 @@ def test_mismatched_files_are_refused(tmp_path: Path) -> None:
 def test_bad_batch_size(tmp_path: Path) -> None:
     with pytest.raises(Sc2DataError, match="--batch-size must be at least 1"):
         label(source(), RULES, tmp_path, batch_size=0, progress=False)
+
+
+# -- the CLI on a real rolled-out dataset ----------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def rolled_out(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A small simulator dataset (3 episodes × 150 steps, 2 shards), made as a user makes one."""
+    pytest.importorskip("sc2data.rollout", reason="dataset storage is not in this build")
+    out = tmp_path_factory.mktemp("rollout") / "data"
+    assert run_cli("rollout", "--out", str(out), "--episodes", "3", "--max-steps", "150",
+                   "--episodes-per-shard", "2", "--seed", "3", "--no-progress") == 0
+    return out
+
+
+@pytest.fixture
+def data(rolled_out: Path, tmp_path: Path) -> Path:
+    return Path(shutil.copytree(rolled_out, tmp_path / "data"))
+
+
+def run_cli(*args: str) -> int:
+    """The console entry point, in-process, as a user runs it: its exit status."""
+    from sc2data.cli import main
+
+    try:
+        main(list(args))
+    except SystemExit as e:
+        return int(e.code or 0)
+    return 0
+
+
+def one_line_error(capsys: pytest.CaptureFixture[str]) -> str:
+    err = capsys.readouterr().err
+    assert err.startswith("sc2data: error: ") and err.count("\n") == 1, err
+    return err
+
+
+def test_cli_label_a_dataset(data: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert run_cli("label", str(data), "--no-progress", "--batch-size", "100") == 0
+    out = capsys.readouterr().out
+    assert "(null: no rule fired)" in out and "450 stacks labelled" in out
+    labels = read_labels(data)
+    assert labels.stacks.num_rows == 450
+    assert labels.stacks.column("step").type == "int32"
+    assert sorted(set(labels.stacks.column("episode").to_pylist())) == [0, 1, 2]
+    assert labels.meta["dataset"]["stacks"] == 450 and labels.meta["dataset"]["fingerprint"]
+    wide = labels.stacks.to_pylist()
+    fired = {(r["episode"], r["step"], r["rule_id"]) for r in labels.fired.to_pylist()}
+    assert fired == {(r["episode"], r["step"], e.id) for r in wide for e in RULES if r[e.id]}
+    assert run_cli("label", str(data), "--no-progress") == 0
+    assert "labels are up to date" in capsys.readouterr().out
+    assert run_cli("verify", str(data)) == 0  # the dataset is untouched by its labels
+
+
+def test_cli_label_selects_rules(data: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert run_cli("label", str(data), "--no-progress", "--rules", "build_scv,train_marine",
+                   "--exclude", "train_marine") == 0
+    assert [r["id"] for r in read_meta(data)["rules"]] == ["build_scv"]
+    assert run_cli("label", str(data), "--no-progress", "--rules", "build_cc") == 2
+    assert "unknown rule id 'build_cc'; known rules: build_scv, collect_minerals" in \
+        one_line_error(capsys)
+
+
+BAD_RULE = """
+import numpy as np
+from sc2data.rulebase import rule
+
+@rule(id="{id}", command="misbehave", requires={requires})
+def f(batch):
+    {body}
+"""
+
+
+@pytest.mark.parametrize("rule_id, requires, body, message", [
+    ("sees_progress", '["screen/build_progress"]', "return np.zeros(len(batch), bool)",
+     r"rule 'sees_progress' \(file .*bad\.py\) needs 'screen/build_progress', which the dataset "
+     r"at .* does not store"),
+    ("late_raiser", '["player"]',
+     "if len(batch) > 5:\n        raise RuntimeError('oops')\n    return np.zeros(len(batch), bool)",
+     r"rule 'late_raiser' from file .*bad\.py raised RuntimeError: oops on the stacks from "
+     r"episode 0 step 0"),
+    ("late_shape", '["player"]',
+     "return np.zeros(min(len(batch), 5), bool)",
+     r"rule 'late_shape' .* returned bool array of shape \(5,\) for 100 stacks"),
+    ("build_scv", '["player"]', "return np.zeros(len(batch), bool)",
+     r"rule id 'build_scv' is defined twice: by sc2data .* and by file .*bad\.py"),
+])
+def test_cli_bad_rules_fail_in_one_line_leaving_nothing(
+        data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], rule_id: str,
+        requires: str, body: str, message: str) -> None:
+    folder = tmp_path / "my_rules"
+    folder.mkdir()
+    (folder / "bad.py").write_text(BAD_RULE.format(id=rule_id, requires=requires, body=body))
+    assert run_cli("label", str(data), "--rules-dir", str(folder), "--no-progress",
+                   "--batch-size", "100") == 2
+    assert re.search(message, one_line_error(capsys))
+    assert nothing_written(data)
+
+
+def test_cli_label_resumes_after_interruption(data: Path, tmp_path: Path,
+                                             monkeypatch: pytest.MonkeyPatch,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    clean = Path(shutil.copytree(data, tmp_path / "clean"))
+    assert run_cli("label", str(clean), "--no-progress") == 0
+
+    from sc2data.dataset import Dataset
+
+    read, calls = Dataset.read, []
+
+    def flaky(self, episodes, steps, keys=None):  # type: ignore[no-untyped-def]
+        calls.append(int(episodes[0]))
+        if int(episodes[0]) == 2:  # the second shard holds episode 2
+            raise KeyboardInterrupt
+        return read(self, episodes, steps, keys)
+
+    monkeypatch.setattr(Dataset, "read", flaky)
+    assert run_cli("label", str(data), "--no-progress") == 130
+    assert "rerun the same command to resume" in capsys.readouterr().err
+    assert nothing_written(data) and len(list((data / PARTS_DIR).glob("*.parquet"))) == 1
+    monkeypatch.setattr(Dataset, "read", read)
+    assert run_cli("label", str(data), "--no-progress") == 0
+    for name in (LABELS_FILE, STACKS_FILE):
+        assert pq.read_table(data / name).equals(pq.read_table(clean / name))
+    assert not (data / PARTS_DIR).exists()

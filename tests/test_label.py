@@ -323,8 +323,7 @@ def test_cli_bad_rules_fail_in_one_line_leaving_nothing(
 
 
 def test_cli_label_resumes_after_interruption(data: Path, tmp_path: Path,
-                                             monkeypatch: pytest.MonkeyPatch,
-                                             capsys: pytest.CaptureFixture[str]) -> None:
+                                             monkeypatch: pytest.MonkeyPatch) -> None:
     clean = Path(shutil.copytree(data, tmp_path / "clean"))
     assert run_cli("label", str(clean), "--no-progress") == 0
 
@@ -339,8 +338,7 @@ def test_cli_label_resumes_after_interruption(data: Path, tmp_path: Path,
         return read(self, episodes, steps, keys)
 
     monkeypatch.setattr(Dataset, "read", flaky)
-    assert run_cli("label", str(data), "--no-progress") == 130
-    assert "rerun the same command to resume" in capsys.readouterr().err
+    assert run_cli("label", str(data), "--no-progress") == 130  # Ctrl-C's exit status
     assert nothing_written(data) and len(list((data / PARTS_DIR).glob("*.parquet"))) == 1
     monkeypatch.setattr(Dataset, "read", read)
     assert run_cli("label", str(data), "--no-progress") == 0

@@ -116,7 +116,7 @@ def end_to_end(data: Path, batch_size: int, repeats: int) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--stacks", type=int, default=200_000)
-    ap.add_argument("--batch-size", type=int, default=1024)
+    ap.add_argument("--batch-size", type=int, default=256)
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--data", type=Path, help="a rolled-out dataset folder (copied first)")
     args = ap.parse_args()

@@ -59,7 +59,7 @@ def label(
     exclude: Optional[str] = typer.Option(None, "--exclude", help="Comma-separated rule ids to "
                                           "leave out."),
     rules_dir: Optional[Path] = typer.Option(None, "--rules-dir", help=_RULES_DIR_HELP),
-    batch_size: int = typer.Option(1024, "--batch-size", help="Stacks per rule call."),
+    batch_size: int = typer.Option(256, "--batch-size", help="Stacks per rule call."),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Show a progress bar."),
 ) -> None:
     """Label every stack of DATA with the rules; writes labels.parquet and stack_labels.parquet."""

@@ -45,6 +45,11 @@ PARTS_DIR = ".labels-parts"
 META_KEY = b"sc2data.labels"
 FORMAT_VERSION = 1
 
+READ_STACKS = 4096
+"""Stacks read from a dataset at once; ``--batch-size`` stacks at a time go through the rules."""
+DEFAULT_BATCH = 256
+"""Stacks per rule call: small enough that a building rule's temporaries stay in cache."""
+
 Batches = Iterable[tuple[np.ndarray, np.ndarray, StackBatch]]
 """``(episode ids, steps, StackBatch)`` triples, as ``Dataset.iter_batches`` yields them."""
 
@@ -197,7 +202,7 @@ def _with_meta(table: pa.Table, meta: dict[str, Any]) -> pa.Table:
 
 
 def label(source: Source, rules: Sequence[Registered], out_dir: Path | str, *,
-          batch_size: int = 1024, progress: bool = True) -> LabelSummary:
+          batch_size: int = DEFAULT_BATCH, progress: bool = True) -> LabelSummary:
     """Label every unit of ``source`` with ``rules`` into ``out_dir``; resumes finished units."""
     from tqdm import tqdm
 
@@ -358,9 +363,15 @@ def dataset_source(path: Path | str) -> Source:
             else np.zeros(0, np.int64)
 
         def batches(batch_size: int, keys: Sequence[str]) -> Batches:
-            for i in range(0, len(ep), batch_size):
-                e, s = ep[i:i + batch_size], st[i:i + batch_size]
-                yield e, s, ds.read(e, s, keys)
+            # Read big (chunk decoding amortises), label small (the rules' temporaries stay in
+            # cache): sub-batches are views of one read.
+            step = max(batch_size, READ_STACKS)
+            for i in range(0, len(ep), step):
+                e, s = ep[i:i + step], st[i:i + step]
+                big = ds.read(e, s, keys)
+                for j in range(0, len(e), batch_size):
+                    part = {k: a[j:j + batch_size] for k, a in big.arrays.items()}
+                    yield e[j:j + batch_size], s[j:j + batch_size], StackBatch(part, big.schema)
         return batches
 
     units = [Unit(key=f"{name}:{info['sha256']}", stacks=sum(n for _, n in info["episodes"]),
@@ -376,7 +387,7 @@ def dataset_source(path: Path | str) -> Source:
 
 def label_dataset(data: Path | str, *, include: Sequence[str] | None = None,
                   exclude: Sequence[str] = (), rules_dir: Path | str | None = None,
-                  batch_size: int = 1024, progress: bool = True) -> LabelSummary:
+                  batch_size: int = DEFAULT_BATCH, progress: bool = True) -> LabelSummary:
     """``sc2data label``: load and select rules, open the dataset, label it into its folder."""
     from sc2data.registry import load_registry
 

@@ -114,3 +114,20 @@ def test_rule_decorator_and_subclass() -> None:
 def test_rule_id_format() -> None:
     assert all(RULE_ID.match(i) for i in ("build_scv", "a", "x2_y3"))
     assert not any(RULE_ID.match(i) for i in ("Build", "2x", "a__b", "a_", "_a", "a-b", "a b"))
+
+
+def test_readme_write_your_own_rule_examples_run() -> None:
+    """The Python blocks of README's "Write your own rule", run in order, as a reader would."""
+    import re
+    from pathlib import Path
+
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    section = readme.split("## Write your own rule", 1)[1].split("\n## ", 1)[0]
+    blocks = re.findall(r"```python\n(.*?)```", section, flags=re.S)
+    assert len(blocks) == 2
+    namespace: dict = {"__name__": "readme_example"}
+    for block in blocks:
+        exec(compile(block, "README.md", "exec"), namespace)  # noqa: S102
+    from sc2data.registry import validate
+
+    validate(namespace["FinishSupplyDepot"](), "README.md")

@@ -34,6 +34,45 @@ def version() -> None:
         typer.echo(f"{name} {v}")
 
 
+rules_app = typer.Typer(help="Labelling rules: built-in, from plugins and from --rules-dir.",
+                        no_args_is_help=True, rich_markup_mode=None)
+app.add_typer(rules_app, name="rules")
+
+_RULES_DIR_HELP = "Also load the rules defined by the .py files of this folder."
+
+
+@rules_app.command("list")
+def rules_list(
+    rules_dir: Optional[Path] = typer.Option(None, "--rules-dir", help=_RULES_DIR_HELP),
+) -> None:
+    """List every rule found, validated: id, version, command text and where it comes from."""
+    from sc2data.registry import format_rules, load_registry
+
+    typer.echo(format_rules(load_registry(rules_dir)))
+
+
+@app.command()
+def label(
+    data: Path = typer.Argument(..., help="Dataset folder (from sc2data rollout)."),
+    rules: Optional[str] = typer.Option(None, "--rules", help="Comma-separated rule ids to use "
+                                        "(default: all)."),
+    exclude: Optional[str] = typer.Option(None, "--exclude", help="Comma-separated rule ids to "
+                                          "leave out."),
+    rules_dir: Optional[Path] = typer.Option(None, "--rules-dir", help=_RULES_DIR_HELP),
+    batch_size: int = typer.Option(256, "--batch-size", help="Stacks per rule call."),
+    progress: bool = typer.Option(True, "--progress/--no-progress", help="Show a progress bar."),
+) -> None:
+    """Label every stack of DATA with the rules; writes labels.parquet and stack_labels.parquet."""
+    from sc2data.label import label_dataset
+    from sc2data.registry import parse_ids
+
+    summary = label_dataset(data, include=parse_ids(rules), exclude=parse_ids(exclude) or [],
+                            rules_dir=rules_dir, batch_size=batch_size, progress=progress)
+    if summary.up_to_date:
+        typer.echo("labels are up to date (same rules, same data)")
+    typer.echo(summary.table())
+
+
 @app.command()
 def render(
     out: str = typer.Option(..., "--out", help="PNG file to write."),

@@ -131,6 +131,47 @@ def rollout(
 
 
 @app.command()
+def pair(
+    recipe: Path = typer.Argument(..., help="Recipe (manifests/*.toml)."),
+    data: Path = typer.Option(..., "--data", help="Labelled dataset folder (sc2data rollout, "
+                                                  "then sc2data label)."),
+    out: Optional[Path] = typer.Option(None, "--out", help="Pair-set folder [default: "
+                                                           "DATA/pairs-<recipe name>]."),
+    progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",
+                                            help="Progress bar (default: on a terminal)."),
+) -> None:
+    """Draw the recipe's matched, mismatched and null pairs; pack the stacks of each split."""
+    from sc2data.pairset import make_pairset
+    from sc2data.recipe import load
+
+    r = load(recipe)
+    s = make_pairset(r, data, out or data / f"pairs-{r.name}", progress=progress)
+    typer.echo(("pair set is up to date (same recipe, same labels): " if s.up_to_date else
+                f"pair set written in {s.seconds:.1f} s: ") + str(s.out))
+    typer.echo(s.table())
+
+
+@app.command()
+def build(
+    recipe: Path = typer.Argument(..., help="Recipe (manifests/*.toml)."),
+    out: Path = typer.Option(..., "--out", help="Build folder (created; rerun to resume)."),
+    workers: int = typer.Option(2, help="Rollout worker processes (the data does not depend "
+                                        "on it)."),
+    progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",
+                                            help="Progress bars (default: on a terminal)."),
+) -> None:
+    """Run a recipe end to end: rollout → label → pair, resuming whatever is already done."""
+    from sc2data.build import PAIRS_DIR, build as run
+    from sc2data.recipe import load
+
+    report = run(load(recipe), out, workers=workers, progress=progress)
+    for line in report.lines:
+        typer.echo(line)
+    typer.echo(report.table())
+    typer.echo(f"train with: sc2data train {out / PAIRS_DIR} --out RUN")
+
+
+@app.command()
 def info(folder: Path = typer.Argument(..., help="Dataset folder.")) -> None:
     """Episodes, frames, bytes, the schema and per-shard figures of a dataset."""
     from sc2data.audit import info as report

@@ -85,29 +85,39 @@ class Commands:
         self.action_result: list[int] = []
         self.last_actions: list[int] = []
         self._last_idle_tag = 0
+        self._groups: dict[int, list[Unit]] = {}
+        self._groups_version = -1
 
     # ------------------------------------------------------------------ availability
 
+    def _selected_by_type(self) -> dict[int, list[Unit]]:
+        """The selection's own units grouped by type (cached until the selection changes)."""
+        g = self.game
+        if self._groups_version != g.selection_version:
+            groups: dict[int, list[Unit]] = {}
+            for u in g.selection:
+                if u.owner == PLAYER_SELF:
+                    groups.setdefault(u.utype, []).append(u)
+            self._groups = groups
+            self._groups_version = g.selection_version
+        return self._groups
+
     def abilities(self) -> frozenset[tuple[int, bool]]:
-        """The abilities of the selection's command cards (the union over selected units)."""
+        """The abilities of the selection's command cards (the union over selected units).
+
+        A structure under construction shows nothing (its card, Cancel, is cut).
+        """
         g = self.game
         out: set[tuple[int, bool]] = set()
-        seen: set[tuple[int, bool, bool]] = set()
-        for u in g.selection:
-            if u.owner != PLAYER_SELF:
-                continue
-            key = (u.utype, u.complete, u.cargo > 0)
-            if key in seen:
-                continue
-            seen.add(key)
-            if not u.complete:
-                continue  # a structure under construction: its card is cut to nothing
-            out.update(_CARD[u.utype])
-            if u.utype == md.SCV:
-                if u.cargo:
+        for utype, us in self._selected_by_type().items():
+            if utype == md.SCV:
+                out.update(_CARD[utype])
+                if any(u.cargo for u in us):
                     out.add(_RETURN_CARGO)
                 if g.has_completed(md.DEPOT):
                     out.add(_BUILD_BARRACKS)
+            elif utype == md.MARINE or any(u.complete for u in us):
+                out.update(_CARD[utype])
         return frozenset(out)
 
     def production_unit(self) -> Unit | None:
@@ -230,8 +240,18 @@ class Commands:
         for u in g.selection:
             sel[u.slot] = 0
         g.selection = sorted(set(units), key=lambda u: u.tag)
+        g.selection_version += 1
         for u in g.selection:
             sel[u.slot] = 1
+
+    def own_on_screen(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Own units' slots with their screen centres and pixel radii."""
+        tab = self.game.table
+        slots = np.flatnonzero(tab.alive & (tab.owner == PLAYER_SELF))
+        wx, wy = tab.positions(slots, self.t)
+        sx = (wx - md.SCREEN_X0) * md.PX_PER_UNIT
+        sy = (md.SCREEN_Y0 - wy) * md.PX_PER_UNIT
+        return slots, sx, sy, tab.radius[slots] * md.PX_PER_UNIT
 
     def world_target(self, kw: dict[str, Any]) -> tuple[float, float, Unit | None]:
         """The world point (and unit under it) of a screen or minimap argument."""
@@ -262,34 +282,26 @@ def _select_point(c: Commands, kw: dict[str, Any]) -> int:
     elif act == 2:
         c.set_selection([s for s in sel if s is not u] if u in sel else sel + [u])
     else:
-        same = [v for v in c.game.units.values()
-                if v.utype == u.utype and v.owner == PLAYER_SELF and _on_screen(c, v)]
+        slots, sx, sy, r = c.own_on_screen()
+        on = (sx > -r) & (sx < md.SCREEN + r) & (sy > -r) & (sy < md.SCREEN + r)
+        on &= c.game.table.utype[slots] == u.utype
+        same = [c.game.units[int(s)] for s in slots[on]]
         c.set_selection(same if act == 3 else sel + same)
     return 0
-
-
-def _on_screen(c: Commands, u: Unit) -> bool:
-    x, y = md.world_to_screen(*u.pos(c.t))
-    r = u.data.radius * md.PX_PER_UNIT
-    return -r < x < md.SCREEN + r and -r < y < md.SCREEN + r
 
 
 def _select_rect(c: Commands, kw: dict[str, Any]) -> int:
     a, b = kw["screen"], kw["screen2"]
     x0, x1 = min(a.x, b.x), max(a.x, b.x) + 1
     y0, y1 = min(a.y, b.y), max(a.y, b.y) + 1
-    hits: list[Unit] = []
-    for u in c.game.units.values():
-        if u.owner != PLAYER_SELF:
-            continue
-        ux, uy = md.world_to_screen(*u.pos(c.t))
-        r = u.data.radius * md.PX_PER_UNIT
-        nx, ny = min(max(ux, x0), x1), min(max(uy, y0), y1)
-        if (nx - ux) ** 2 + (ny - uy) ** 2 < r * r:
-            hits.append(u)
-    movers = [u for u in hits if not u.data.structure]
-    if movers:
-        hits = movers  # a box over units and structures selects the units only
+    slots, sx, sy, r = c.own_on_screen()
+    nx = np.minimum(np.maximum(sx, x0), x1) - sx
+    ny = np.minimum(np.maximum(sy, y0), y1) - sy
+    hit = slots[nx * nx + ny * ny < r * r]
+    movers = hit[c.game.table.layer[hit] == 1]
+    if len(movers):
+        hit = movers  # a box over units and structures selects the units only
+    hits = [c.game.units[int(s)] for s in hit]
     add = bool(kw["select_add"])
     c.set_selection(c.game.selection + hits if add else hits)
     return 0

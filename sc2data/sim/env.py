@@ -77,7 +77,7 @@ class BuildMarinesEnv(environment.Base):
         self._state = environment.StepType.FIRST
         self._game.events = []
         self.events = []
-        return self._observe(reward=0, discount=0.0)
+        return self._observe(reward=0.0, discount=0.0)
 
     def step(self, actions_: Sequence[Any], step_mul: int | None = None
              ) -> tuple[environment.TimeStep, ...]:
@@ -120,7 +120,7 @@ class BuildMarinesEnv(environment.Base):
 
     # ------------------------------------------------------------------ internals
 
-    def _observe(self, reward: int, discount: float) -> tuple[environment.TimeStep, ...]:
+    def _observe(self, reward: float, discount: float) -> tuple[environment.TimeStep, ...]:
         screen, minimap, top = self._renderer.draw(self._game)
         self._commands.top = top
         self._available = self._commands.available()

@@ -89,6 +89,8 @@ class Game:
         self.idle_workers: set[Unit] = set()
         self.idle_producers: set[Unit] = set()
         self.selection: list[Unit] = []
+        self.selection_version = 0
+        """Bumped whenever the selection changes (commands cache what they derive from it)."""
         self.groups: list[list[Unit]] = [[] for _ in range(10)]
 
         self.patches = [self._create(md.MINERAL, PLAYER_NEUTRAL, x, y) for x, y in md.MINERAL_POS]
@@ -689,6 +691,7 @@ class Game:
         self.idle_producers.discard(u)
         if u in self.selection:
             self.selection.remove(u)
+            self.selection_version += 1
         for g in self.groups:
             if u in g:
                 g.remove(u)

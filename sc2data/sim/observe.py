@@ -127,6 +127,17 @@ class _Layer:
         self.aa = np.zeros(size * size, dtype=np.float64)
 
 
+def _runs(rows: list[int]) -> list[tuple[int, int]]:
+    """Sorted row indices as contiguous [lo, hi) runs."""
+    out: list[tuple[int, int]] = []
+    for r in rows:
+        if out and out[-1][1] == r:
+            out[-1] = (out[-1][0], r + 1)
+        else:
+            out.append((r, r + 1))
+    return out
+
+
 class Renderer:
     """Draws a :class:`Game` into pysc2-shaped feature arrays."""
 
@@ -152,6 +163,8 @@ class Renderer:
         self.minimap_base[M.height_map.index] = np.where(m_play, md.HEIGHT_VALUE, 0)
         self.minimap_base[M.visibility_map.index] = np.where(m_play, 2, 0)
         self.minimap_base[M.camera.index] = md.camera_minimap_mask()
+        drawn = set(_UNIT_SCREEN) | {S.unit_density.index, S.unit_density_aa.index}
+        self._screen_static_runs = _runs([i for i in range(len(S)) if i not in drawn])
         self._version = -1
         self._s_static = _Layer(_N)
         self._m_static = _Layer(_NM)
@@ -244,7 +257,9 @@ class Renderer:
         sx = (wx - md.SCREEN_X0) * md.PX_PER_UNIT
         sy = (md.SCREEN_Y0 - wy) * md.PX_PER_UNIT
         top, density, aa = self._compose(self._s_static, self._s_disk, slots, sx, sy, True)
-        screen = self.screen_base.copy()
+        screen = np.empty_like(self.screen_base)
+        for lo, hi in self._screen_static_runs:  # terrain rows and the always-zero rows
+            screen[lo:hi] = self.screen_base[lo:hi]
         flat = screen.reshape(len(S), _N * _N)
         for row, layer in enumerate(_UNIT_SCREEN):
             attr[row].take(top, out=flat[layer], mode="clip")

@@ -17,7 +17,9 @@ from sc2data.sim import mapdata as md
 from sc2data.sim.commands import Commands
 from sc2data.sim.game import Game
 from sc2data.sim.store import PLAYER_SELF, Unit
-from pysc2.lib import named_array
+
+named_array = features.named_array
+"""pysc2's ``named_array`` module (``NamedDict``, ``NamedNumpyArray``), as ``features`` uses it."""
 
 MAP_NAME = "BuildMarines"
 HOME_RACE = 1

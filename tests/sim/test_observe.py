@@ -88,7 +88,8 @@ def test_minimap() -> None:
     assert ys.min() == 27 and ys.max() == 50  # 64 − 37 … 64 − 13
     ut = np.asarray(mm.unit_type)
     ys, xs = np.nonzero(ut == md.CC)
-    assert abs(xs.mean() + 0.5 - md.CC_POS[0]) < 1 and abs(ys.mean() + 0.5 - (64 - md.CC_POS[1])) < 1
+    assert abs(xs.mean() + 0.5 - md.CC_POS[0]) < 1
+    assert abs(ys.mean() + 0.5 - (64 - md.CC_POS[1])) < 1
     assert (ut == md.SCV).sum() >= 6
     assert (np.asarray(mm.player_relative)[ut == md.MINERAL] == 3).all()
 

@@ -6,8 +6,20 @@ import pytest
 
 from sc2data.sim import mapdata as md
 
-from sim_helpers import (BARRACKS_SITE, DEPOT_SITE, F, build, new_env, of_type, pixel, scvs,
-                         select, step, wait, wait_until)
+from sim_helpers import (
+    BARRACKS_SITE,
+    DEPOT_SITE,
+    F,
+    build,
+    new_env,
+    of_type,
+    pixel,
+    scvs,
+    select,
+    step,
+    wait,
+    wait_until,
+)
 
 
 def test_train_scv_costs_50_and_takes_272_loops() -> None:

@@ -86,7 +86,9 @@ class Building:
             self._start_construction(u, b, t)
             return
         data = md.UNIT_DATA[u.build_type]
-        if not self.placement_ok(u.tx, u.ty, data.footprint) or self.minerals < data.minerals:
+        tech_lost = u.build_type == md.BARRACKS and not self.has_completed(md.DEPOT)
+        if tech_lost or not self.placement_ok(u.tx, u.ty, data.footprint) or \
+                self.minerals < data.minerals:
             self.order_idle(u, t)
             return
         self.minerals -= data.minerals

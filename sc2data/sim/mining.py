@@ -99,10 +99,10 @@ class Mining:
         take = min(md.CARRY, p.minerals)
         p.minerals -= take
         u.cargo = take
+        u.phase = TO_CC
         self._next_harvester(p, t)
         if p.minerals <= 0:
-            self._deplete(p, t)
-        u.phase = TO_CC
+            self._deplete(p, t)  # moves the workers of ``p``, ``u`` too, to the nearest field
         self._to_cc(u, t)
 
     def _deplete(self: Game, p: Unit, t: float) -> None:

@@ -20,10 +20,20 @@ from sc2data.sim.mapdata import UNIT_DATA, UnitData
 
 @dataclass(frozen=True)
 class Event:
-    """Something that happened in the game during one agent step (see ``BuildMarinesEnv.events``).
+    """Something that happened in the game during one agent step (``BuildMarinesEnv.events``).
 
-    ``kind`` is one of :data:`EVENT_KINDS`; ``unit_type`` is a pysc2 ``units`` id; ``tag`` the
-    unit's unique tag (for ``queued``/``cancelled``: the producer's tag).
+    ``loop`` is the game loop it happened on, within ``[L − step_mul, L]`` for a step that
+    ends on loop ``L`` (what the step's action did at once happens on ``L − step_mul``);
+    ``unit_type`` a pysc2 ``units`` id; ``tag`` a unit's unique tag. Kinds
+    (:data:`EVENT_KINDS`):
+
+    - ``placed``: an SCV placed a structure, construction started (the new structure).
+    - ``queued``: a unit was added to a train queue (the unit's type, the producer's tag).
+    - ``completed``: a unit finished training or a structure finished building (the new unit).
+    - ``died``: a unit was killed, or a mineral field ran out (the unit).
+    - ``cancelled``: a queued unit was cancelled and refunded (its type, the producer's tag).
+    - ``gathered``: an idle SCV was ordered to mine (the SCV).
+    - ``returned``: an SCV delivered minerals to the CC (the SCV).
     """
 
     loop: int

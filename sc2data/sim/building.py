@@ -11,7 +11,6 @@ completes. Supply from a depot or CC counts only once it is complete.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -26,16 +25,14 @@ from sc2data.sim.codes import (
     PRODUCE_DONE,
     QUEUE_IS_FULL,
 )
+from sc2data.sim.core import GameCore
 from sc2data.sim.store import BUILD, CONSTRUCT, PLAYER_SELF, Unit
 
-if TYPE_CHECKING:
-    from sc2data.sim.game import Game
 
+class Building(GameCore):
+    """Structures and train queues (part of :class:`~sc2data.sim.game.Game`)."""
 
-class Building:
-    """Structures and train queues (a mixin of :class:`Game`)."""
-
-    def order_build(self: Game, u: Unit, utype: int, x: float, y: float, t: float) -> int:
+    def order_build(self, u: Unit, utype: int, x: float, y: float, t: float) -> int:
         """Send an SCV to build ``utype`` at (x, y); checks placement and cost as the game does.
 
         The cost is only spent when the SCV arrives and the structure is placed.
@@ -58,7 +55,7 @@ class Building:
             self._at(self._move(u, t, ux + (sx - ux) * f, uy + (sy - uy) * f), ARRIVE, u)
         return 0
 
-    def order_resume(self: Game, u: Unit, b: Unit, t: float) -> None:
+    def order_resume(self, u: Unit, b: Unit, t: float) -> None:
         """An SCV resumes building an unfinished structure whose builder stopped."""
         if b.builder is not None:
             self.order_move(u, b.x1, b.y1, t)
@@ -69,14 +66,14 @@ class Building:
         x, y = self._edge_point(u.pos(t), b, u.data.radius)
         self._at(self._move(u, t, x, y), ARRIVE, u)
 
-    def placement_ok(self: Game, x: float, y: float, footprint: tuple[int, int]) -> bool:
+    def placement_ok(self, x: float, y: float, footprint: tuple[int, int]) -> bool:
         """Buildable, unoccupied ground inside the playable area (units are pushed aside)."""
         rows, cols = md.footprint_cells(x, y, footprint)
         if rows.start < 0 or cols.start < 0 or rows.stop > md.MAP_SIZE or cols.stop > md.MAP_SIZE:
             return False
         return bool(self.playable[rows, cols].all() and not self.occupied[rows, cols].any())
 
-    def _place(self: Game, u: Unit, t: float) -> None:
+    def _place(self, u: Unit, t: float) -> None:
         """The builder reached its site: start the structure, or give up as the game would."""
         b = u.building
         if b is not None:  # resuming an unfinished structure
@@ -99,7 +96,7 @@ class Building:
         self._emit(t, "placed", b)
         self._start_construction(u, b, t)
 
-    def _start_construction(self: Game, u: Unit, b: Unit, t: float) -> None:
+    def _start_construction(self, u: Unit, b: Unit, t: float) -> None:
         self._set_order(u, CONSTRUCT, t)
         self._halt(u, t)
         u.building = b
@@ -110,13 +107,13 @@ class Building:
         self.table.build(b)
         self._at(t + (1.0 - b.prog0) * b.data.build_loops, BUILD_DONE, b)
 
-    def _pause_construction(self: Game, b: Unit, t: float) -> None:
+    def _pause_construction(self, b: Unit, t: float) -> None:
         b.prog0, b.pt0, b.prate = b.progress(t), t, 0.0
         b.qtoken += 1
         b.builder = None
         self.table.build(b)
 
-    def _build_done(self: Game, b: Unit, t: float) -> None:
+    def _build_done(self, b: Unit, t: float) -> None:
         b.prog0, b.pt0, b.prate = 1.0, t, 0.0
         self.table.build(b)
         self._emit(t, "completed", b)
@@ -131,7 +128,7 @@ class Building:
             u.building = None  # finished: nothing to pause
             self.order_idle(u, t)
 
-    def train(self: Game, b: Unit, utype: int, t: float) -> int:
+    def train(self, b: Unit, utype: int, t: float) -> int:
         """Queue a unit: cost and supply are taken now; refused when full, poor or capped."""
         data = md.UNIT_DATA[utype]
         if len(b.queue) >= md.QUEUE_LIMIT:
@@ -149,25 +146,19 @@ class Building:
             self._start_item(b, t)
         return 0
 
-    def _add_food(self: Game, utype: int, n: int) -> None:
-        if utype == md.SCV:
-            self.food_workers += n
-        else:
-            self.food_army += n
-
-    def _start_item(self: Game, b: Unit, t: float) -> None:
+    def _start_item(self, b: Unit, t: float) -> None:
         self.idle_producers.discard(b)
         b.qt0 = t
         b.qtoken += 1
         self._at(t + md.UNIT_DATA[b.queue[0]].build_loops, PRODUCE_DONE, b)
 
-    def item_progress(self: Game, b: Unit, t: float) -> float:
+    def item_progress(self, b: Unit, t: float) -> float:
         """Progress in [0, 1] of the first unit in ``b``'s queue."""
         if not b.queue:
             return 0.0
         return min(1.0, (t - b.qt0) / md.UNIT_DATA[b.queue[0]].build_loops)
 
-    def cancel(self: Game, b: Unit, index: int, t: float) -> int:
+    def cancel(self, b: Unit, index: int, t: float) -> int:
         """Cancel the ``index``-th queued unit: refund its cost and supply."""
         if index >= len(b.queue):
             return ERROR
@@ -185,7 +176,7 @@ class Building:
                 self.idle_producers.add(b)
         return 0
 
-    def _produce_done(self: Game, b: Unit, t: float) -> None:
+    def _produce_done(self, b: Unit, t: float) -> None:
         utype = b.queue.pop(0)
         if utype == md.SCV:
             self._spawn_scv(b, t)
@@ -196,7 +187,7 @@ class Building:
         else:
             self.idle_producers.add(b)
 
-    def _spawn_scv(self: Game, cc: Unit, t: float) -> None:
+    def _spawn_scv(self, cc: Unit, t: float) -> None:
         rally = cc.rally
         toward = (rally[0], rally[1]) if rally else (cc.x1 - 1.0, cc.y1)
         x, y = self._edge_point(toward, cc, md.UNIT_DATA[md.SCV].radius)
@@ -208,7 +199,7 @@ class Building:
         elif rally:
             self.order_move(u, rally[0], rally[1], t)
 
-    def _spawn_marine(self: Game, b: Unit, t: float) -> None:
+    def _spawn_marine(self, b: Unit, t: float) -> None:
         x, y = self._spawn_spot(b, t)
         u = self._create(md.MARINE, PLAYER_SELF, x, y, t)
         self.score += 1
@@ -217,7 +208,7 @@ class Building:
         if b.rally:
             self.order_move(u, b.rally[0], b.rally[1], t)
 
-    def _spawn_spot(self: Game, b: Unit, t: float) -> tuple[float, float]:
+    def _spawn_spot(self, b: Unit, t: float) -> tuple[float, float]:
         """A free spot next to ``b``: rings around its footprint, south side first."""
         r = md.UNIT_DATA[md.MARINE].radius
         ground = self.table.ground()

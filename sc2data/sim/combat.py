@@ -9,28 +9,25 @@ moving target is re-aimed every ``CHASE_RECHECK`` loops.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 from sc2data.sim import mapdata as md
 from sc2data.sim.codes import CHASE_RECHECK, FIRE, RECHECK
+from sc2data.sim.core import GameCore
 from sc2data.sim.store import ATTACK, Unit
 
-if TYPE_CHECKING:
-    from sc2data.sim.game import Game
 
+class Combat(GameCore):
+    """Attack orders, chasing and firing (part of :class:`~sc2data.sim.game.Game`)."""
 
-class Combat:
-    """Attack orders, chasing and firing (a mixin of :class:`Game`)."""
-
-    def order_attack(self: Game, u: Unit, target: Unit, t: float) -> None:
+    def order_attack(self, u: Unit, target: Unit, t: float) -> None:
         self._set_order(u, ATTACK, t)
         u.target = target
         self._attack_update(u, t)
 
-    def _reach(self: Game, u: Unit, v: Unit) -> float:
+    def _reach(self, u: Unit, v: Unit) -> float:
         return md.MARINE_RANGE + u.data.radius + v.data.radius
 
-    def _attack_update(self: Game, u: Unit, t: float) -> None:
+    def _attack_update(self, u: Unit, t: float) -> None:
         v = u.target
         if v is None or not v.alive:
             self.order_idle(u, t)
@@ -48,7 +45,7 @@ class Combat:
         moving = v.t1 > t
         self._at(min(arrive, t + CHASE_RECHECK) if moving else arrive, RECHECK, u)
 
-    def _fire(self: Game, u: Unit, t: float) -> None:
+    def _fire(self, u: Unit, t: float) -> None:
         v = u.target
         if v is None or not v.alive:
             self.order_idle(u, t)

@@ -9,20 +9,17 @@ between field and CC takes distance / SCV speed plus the calibrated ``MINING_LEG
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 from sc2data.sim import mapdata as md
 from sc2data.sim.codes import ARRIVE, HARVEST_DONE, MUST_TARGET_UNIT
+from sc2data.sim.core import GameCore
 from sc2data.sim.store import GATHER, HARVESTING, IDLE, RETURN, TO_CC, TO_PATCH, WAITING, Unit
 
-if TYPE_CHECKING:
-    from sc2data.sim.game import Game
 
+class Mining(GameCore):
+    """Gather, return cargo, field queues, deliveries (part of :class:`~sc2data.sim.game.Game`)."""
 
-class Mining:
-    """Gather, return cargo, field queues and deliveries (a mixin of :class:`Game`)."""
-
-    def order_gather(self: Game, u: Unit, patch: Unit | None, t: float, emit: bool = True) -> int:
+    def order_gather(self, u: Unit, patch: Unit | None, t: float, emit: bool = True) -> int:
         """Send an SCV to mine ``patch`` (spreading to a less busy field like the game does)."""
         if patch is None or not patch.alive:
             return MUST_TARGET_UNIT
@@ -39,7 +36,7 @@ class Mining:
             self._to_patch(u, t)
         return 0
 
-    def order_return(self: Game, u: Unit, t: float) -> None:
+    def order_return(self, u: Unit, t: float) -> None:
         """Return cargo to the CC, then resume mining the last field (if any)."""
         patch = u.patch if u.order in (GATHER, RETURN) else None
         self._set_order(u, RETURN, t)
@@ -48,13 +45,13 @@ class Mining:
             patch.assigned += 1
         self._to_cc(u, t)
 
-    def _patch_at(self: Game, x: float, y: float) -> Unit | None:
+    def _patch_at(self, x: float, y: float) -> Unit | None:
         for p in self.patches:
             if p.alive and abs(p.x1 - x) < 0.01 and abs(p.y1 - y) < 0.01:
                 return p
         return None
 
-    def _spread(self: Game, patch: Unit) -> Unit:
+    def _spread(self, patch: Unit) -> Unit:
         """The field a worker sent to ``patch`` ends up mining: itself unless it is full and a
         field with fewer workers exists, then the nearest such one."""
         if patch.assigned < md.WORKERS_PER_PATCH:
@@ -66,12 +63,12 @@ class Mining:
         cands = [p for p in alive if p.assigned == least]
         return min(cands, key=lambda p: (math.hypot(p.x1 - patch.x1, p.y1 - patch.y1), p.tag))
 
-    def _to_patch(self: Game, u: Unit, t: float) -> None:
+    def _to_patch(self, u: Unit, t: float) -> None:
         u.phase = TO_PATCH
         x, y = self._edge_point((self.cc.x1, self.cc.y1), u.patch, u.data.radius)  # type: ignore[arg-type]
         self._at(self._move(u, t, x, y, md.MINING_LEG_OVERHEAD), ARRIVE, u)
 
-    def _to_cc(self: Game, u: Unit, t: float) -> None:
+    def _to_cc(self, u: Unit, t: float) -> None:
         if not self.cc.alive:
             self.order_idle(u, t)
             return
@@ -79,19 +76,19 @@ class Mining:
         x, y = self._edge_point(src, self.cc, u.data.radius)
         self._at(self._move(u, t, x, y, md.MINING_LEG_OVERHEAD), ARRIVE, u)
 
-    def _next_harvester(self: Game, p: Unit, t: float) -> None:
+    def _next_harvester(self, p: Unit, t: float) -> None:
         while p.waiting and p.harvester is None:
             w = p.waiting.pop(0)
             if w.alive and w.order == GATHER and w.phase == WAITING and w.patch is p:
                 self._start_harvest(w, p, t)
 
-    def _start_harvest(self: Game, u: Unit, p: Unit, t: float) -> None:
+    def _start_harvest(self, u: Unit, p: Unit, t: float) -> None:
         """``u`` takes the field: it mines once the previous miner has cleared it."""
         u.phase = HARVESTING
         p.harvester = u
         self._at(max(t, p.ready) + md.HARVEST_LOOPS, HARVEST_DONE, u)
 
-    def _harvest_done(self: Game, u: Unit, t: float) -> None:
+    def _harvest_done(self, u: Unit, t: float) -> None:
         p = u.patch
         assert p is not None
         p.harvester = None
@@ -105,7 +102,7 @@ class Mining:
             self._deplete(p, t)  # moves the workers of ``p``, ``u`` too, to the nearest field
         self._to_cc(u, t)
 
-    def _deplete(self: Game, p: Unit, t: float) -> None:
+    def _deplete(self, p: Unit, t: float) -> None:
         self._kill(p, t)
         for w in [w for w in self.units.values() if w.patch is p]:
             alive = [q for q in self.patches if q.alive]
@@ -120,7 +117,7 @@ class Mining:
             else:
                 self.order_gather(w, nearest, t, emit=False)
 
-    def _deliver(self: Game, u: Unit, t: float) -> None:
+    def _deliver(self, u: Unit, t: float) -> None:
         if u.cargo:
             self.minerals += u.cargo
             self.collected += u.cargo

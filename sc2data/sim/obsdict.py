@@ -125,8 +125,8 @@ _ECONOMY = int(features.ScoreCategories.economy)
 
 
 def build(g: Game, c: Commands, screen: np.ndarray, minimap: np.ndarray,
-          available: list[int], hp: np.ndarray, prog: np.ndarray) -> named_array.NamedDict:
-    """The observation dict for the game's current loop (``hp``/``prog``: per-slot values)."""
+          available: list[int], hp: np.ndarray, prog: np.ndarray) -> dict[str, Any]:
+    """The observation ``NamedDict`` at the game's current loop (``hp``/``prog``: per slot)."""
     out = named_array.NamedDict({
         "single_select": _EMPTY_UNITS,
         "multi_select": _EMPTY_UNITS,

@@ -257,6 +257,7 @@ class Renderer:
         sx = (wx - md.SCREEN_X0) * md.PX_PER_UNIT
         sy = (md.SCREEN_Y0 - wy) * md.PX_PER_UNIT
         top, density, aa = self._compose(self._s_static, self._s_disk, slots, sx, sy, True)
+        assert density is not None and aa is not None
         screen = np.empty_like(self.screen_base)
         for lo, hi in self._screen_static_runs:  # terrain rows and the always-zero rows
             screen[lo:hi] = self.screen_base[lo:hi]

@@ -141,6 +141,28 @@ class UnitTable:
     INT_COLS = ("utype", "owner", "layer", "tag")
     ATTR_ROWS = 7
 
+    # Views into ``f`` / ``i`` / ``attr`` (rebound when the table grows).
+    x0: np.ndarray
+    y0: np.ndarray
+    t0: np.ndarray
+    x1: np.ndarray
+    y1: np.ndarray
+    t1: np.ndarray
+    prog0: np.ndarray
+    pt0: np.ndarray
+    prate: np.ndarray
+    dmg: np.ndarray
+    radius: np.ndarray
+    hpmax: np.ndarray
+    ratio_k: np.ndarray
+    """255 / max hit points (0 for mineral fields): hit points → ``unit_hit_points_ratio``."""
+    utype: np.ndarray
+    owner: np.ndarray
+    layer: np.ndarray
+    """0 for structures and mineral fields, 1 for ground units (drawn on top)."""
+    tag: np.ndarray
+    selected: np.ndarray
+
     def __init__(self, capacity: int = 512) -> None:
         self.capacity = 0
         self.alive = np.zeros(0, dtype=bool)

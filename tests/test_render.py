@@ -77,8 +77,8 @@ def test_colorize_clips_values_beyond_the_palette() -> None:
     assert np.array_equal(img[0, 2], img[0, 1])
 
 
-def test_cli_render_plays_the_simulator_and_writes_the_png(tmp_path: Path,
-                                                          capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_render_plays_the_simulator_and_writes_the_png(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "frame.png"
     assert _run("render", "--steps", "40", "--seed", "3", "--agent", "reduced-random",
                 "--out", str(out)) == 0

@@ -183,29 +183,35 @@ class Commands:
                     func, func_call.arguments))
             for s, a in zip(sizes, arg):
                 # pysc2's own check, kept as is: only negative values fail it.
-                if not np.all(0 <= a) and np.all(a < s):
+                if type(a) is int:  # the common case, without numpy's overhead
+                    if not 0 <= a and a < s:
+                        raise ValueError("Argument is out of range for %s, got: %s" % (
+                            func, func_call.arguments))
+                elif not np.all(0 <= a) and np.all(a < s):
                     raise ValueError("Argument is out of range for %s, got: %s" % (
                         func, func_call.arguments))
         return {t.name: t.fn(a) for t, a in zip(func.args, func_call.arguments)}
 
     # ------------------------------------------------------------------ execution
 
-    def apply(self, func_call: Any, available: Sequence[int]) -> None:
-        """Validate and carry out one ``FunctionCall`` at the game's current loop."""
-        kw = self.validate(func_call, available)
-        fid = int(func_call.function)
+    def apply_all(self, calls: Sequence[Any], available: Sequence[int]) -> None:
+        """Validate every call (raising before any takes effect), then carry them out in order.
+
+        ``last_actions`` lists the functions that took effect (no_op sends nothing), and
+        ``action_result`` the game's error for each that did not.
+        """
+        checked = [(int(c.function), self.validate(c, available)) for c in calls]
+        self.last_actions = []
         self.action_result = []
-        if fid == 0:
-            self.last_actions = []
-            return
-        self.last_actions = [fid]
-        handler = HANDLERS.get(fid)
-        if handler is None:  # available but meaningless here (the camera is locked)
-            return
-        err = handler(self, kw)
-        if err:
-            self.action_result = [err]
-            self.last_actions = []
+        for fid, kw in checked:
+            if fid == 0:
+                continue
+            handler = HANDLERS.get(fid)
+            err = handler(self, kw) if handler is not None else 0  # None: the camera is locked
+            if err:
+                self.action_result.append(err)
+            else:
+                self.last_actions.append(fid)
 
     # ---- helpers
 

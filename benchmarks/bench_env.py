@@ -25,16 +25,22 @@ WORKLOADS: tuple[str, ...] = ("env only (no_op)", "random", "reduced-random", "s
 _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 
-def _run(env: Any, agent: Any, steps: int) -> None:
-    """``steps`` agent steps, restarting the episode when it ends."""
+def _run(env: Any, agent: Any, steps: int) -> float:
+    """``steps`` agent steps, restarting the episode when it ends; seconds spent in the agent."""
     agent.setup(env.observation_spec()[0], env.action_spec()[0])
     timestep = env.reset()[0]
     agent.reset()
+    in_agent = 0.0
+    clock = time.perf_counter
     for _ in range(steps):
         if timestep.last():
             timestep = env.reset()[0]
             agent.reset()
-        timestep = env.step([agent.step(timestep)])[0]
+        t0 = clock()
+        call = agent.step(timestep)
+        in_agent += clock() - t0
+        timestep = env.step([call])[0]
+    return in_agent
 
 
 def _agent(workload: str, seed: int) -> Any:
@@ -52,19 +58,21 @@ def _measure(workload: str, backend: str, steps: int, repeats: int, core: int,
 
     env = make_env(backend, seed=0)
     _run(env, _agent(workload, 0), 50)  # warm up: imports, caches, first reset
-    rates = []
+    rates, shares = [], []
     for r in range(repeats):
         agent = _agent(workload, r + 1)
         t0 = time.perf_counter()
-        _run(env, agent, steps)
-        rates.append(steps / (time.perf_counter() - t0))
+        in_agent = _run(env, agent, steps)
+        elapsed = time.perf_counter() - t0
+        rates.append(steps / elapsed)
+        shares.append(in_agent / elapsed)
     tracemalloc.start()
     _run(env, _agent(workload, 99), min(steps, 600))
     _, traced_peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     env.close()
     rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # KiB on Linux
-    result.put((rates, rss_mb, traced_peak / 2**20))
+    result.put((rates, statistics.median(shares), rss_mb, traced_peak / 2**20))
 
 
 def machine() -> str:
@@ -94,20 +102,22 @@ def main() -> None:
         os.environ[var] = "1"
 
     ctx = mp.get_context("spawn")
-    print(f"machine: {machine()}")
+    print(f"machine: {machine()}; load average before: {os.getloadavg()[0]:.2f}")
     print(f"env {args.env}, {args.steps} agent steps × {args.repeats} repeats, one core "
           f"(#{args.core}), every layer drawn\n")
-    print("| workload | steps/s (median) | min – max | peak RSS (MB) | traced peak (MB) |")
-    print("| --- | ---: | ---: | ---: | ---: |")
+    print("| workload | steps/s (median) | min – max | time in agent | peak RSS (MB) "
+          "| traced peak (MB) |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: |")
     for workload in args.workloads:
         queue = ctx.Queue()
         p = ctx.Process(target=_measure, args=(workload, args.env, args.steps, args.repeats,
                                                args.core, queue))
         p.start()
-        rates, rss, traced = queue.get()
+        rates, share, rss, traced = queue.get()
         p.join()
         print(f"| {workload} | {statistics.median(rates):,.0f} | "
-              f"{min(rates):,.0f} – {max(rates):,.0f} | {rss:,.0f} | {traced:,.1f} |", flush=True)
+              f"{min(rates):,.0f} – {max(rates):,.0f} | {share:.0%} | {rss:,.0f} | "
+              f"{traced:,.1f} |", flush=True)
 
 
 if __name__ == "__main__":

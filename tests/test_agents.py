@@ -87,6 +87,11 @@ def test_random_agent_is_reproducible_and_leaves_the_global_rng_alone() -> None:
     a, b, c = calls(7), calls(7), calls(8)
     assert np.array_equal(np.random.get_state()[1], before)
     assert a == b and a != c
+    # Exactly what pysc2's own agent plays after numpy.random.seed(7).
+    plain = random_agent.RandomAgent()
+    plain.setup(obs_spec, act_spec)
+    np.random.seed(7)
+    assert [plain.step(ts) for _ in range(30)] == a
     assert all(int(call.function) in (0, 1, 2, 3, 4, 6, 7, 12, 42, 91) for call in a)
 
 

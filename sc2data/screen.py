@@ -33,22 +33,43 @@ def _rows(a: Any) -> np.ndarray:
 
 
 class ScreenView:
-    """One observation, parsed once per agent step."""
+    """One observation, parsed once per agent step; each part only when first asked for."""
 
     def __init__(self, timestep: Any) -> None:
-        o = timestep.observation
-        screen = np.asarray(o["feature_screen"])
-        self.unit_type = screen[_S.unit_type.index]
-        self.player_relative = screen[_S.player_relative.index]
-        self.buildable = screen[_S.buildable.index] > 0
-        self.selected = screen[_S.selected.index] > 0
-        self.player = np.asarray(o["player"])
-        self.available = frozenset(np.asarray(o["available_actions"]).tolist())
-        self.single_select = _rows(o["single_select"])
-        self.multi_select = _rows(o["multi_select"])
-        self.build_queue = _rows(o["build_queue"])
+        self._obs = timestep.observation
+        self._screen = np.asarray(self._obs["feature_screen"])
+        self.unit_type = self._screen[_S.unit_type.index]
+        self.player = np.asarray(self._obs["player"])
         self.px_per_unit = self.unit_type.shape[1] / CAMERA_WIDTH
         self._placements: dict[int, np.ndarray] = {}
+
+    @functools.cached_property
+    def player_relative(self) -> np.ndarray:
+        return self._screen[_S.player_relative.index]
+
+    @functools.cached_property
+    def buildable(self) -> np.ndarray:
+        return self._screen[_S.buildable.index] > 0
+
+    @functools.cached_property
+    def selected(self) -> np.ndarray:
+        return self._screen[_S.selected.index] > 0
+
+    @functools.cached_property
+    def available(self) -> frozenset[int]:
+        return frozenset(np.asarray(self._obs["available_actions"]).tolist())
+
+    @functools.cached_property
+    def single_select(self) -> np.ndarray:
+        return _rows(self._obs["single_select"])
+
+    @functools.cached_property
+    def multi_select(self) -> np.ndarray:
+        return _rows(self._obs["multi_select"])
+
+    @functools.cached_property
+    def build_queue(self) -> np.ndarray:
+        return _rows(self._obs["build_queue"])
 
     def can(self, call: actions.FunctionCall) -> bool:
         """Whether pysc2 lists the call's function as available now."""

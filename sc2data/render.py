@@ -100,8 +100,12 @@ def render_frame(obs: Any, path: str | Path) -> Path:
     fig.text(PAD_PX / width, 1 - 4 / height, _header(observation), fontsize=9, va="top",
              ha="left")
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    FigureCanvasAgg(fig).print_png(str(path))
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        FigureCanvasAgg(fig).print_png(str(path))
+    except OSError as e:
+        raise Sc2DataError(f"cannot write the PNG to {path}: {e.strerror or e}; "
+                           "choose a writable --out path") from e
     return path
 
 

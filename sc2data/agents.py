@@ -334,7 +334,13 @@ AGENTS: dict[str, Callable[[int], base_agent.BaseAgent]] = {
 
 
 def make_agent(name: str, *, seed: int) -> base_agent.BaseAgent:
-    """A new agent by registry name, seeded; call ``setup(obs_spec, action_spec)`` before use."""
+    """A new agent by registry name; call ``setup(obs_spec, action_spec)`` before use.
+
+    Seeding: ``random`` draws from its own ``numpy.random.RandomState(seed)`` (the same calls
+    pysc2's agent makes after ``numpy.random.seed(seed)``); ``reduced-random`` and ``scripted``
+    draw from ``numpy.random.default_rng(seed)`` (the scripted agent only to pick which SCV to
+    click). None touches a global RNG, so one seed and one environment seed give one episode.
+    """
     try:
         factory = AGENTS[name]
     except KeyError:

@@ -4,7 +4,10 @@ Each workload runs in its own fresh process pinned to one CPU core (single-threa
 peak memory is that workload's own: the process's peak RSS (``ru_maxrss``, which includes the
 interpreter and pysc2) and, in a separate untimed pass, the peak of Python allocations made while
 stepping (``tracemalloc``). A repeat is N agent steps from ``reset`` on (episodes restart as they
-end; resets are inside the timing); the table shows the median of the repeats.
+end; resets are inside the timing). The table shows medians over the repeats, in wall-clock
+steps per second and in steps per second of the process's own CPU time: what one dedicated core
+gives; on a shared machine the wall-clock figure also counts time the core gave to others.
+"Time in agent" is the share of wall-clock time spent in ``agent.step``.
 
     python benchmarks/bench_env.py --steps 1800 --repeats 5
 """
@@ -58,13 +61,14 @@ def _measure(workload: str, backend: str, steps: int, repeats: int, core: int,
 
     env = make_env(backend, seed=0)
     _run(env, _agent(workload, 0), 50)  # warm up: imports, caches, first reset
-    rates, shares = [], []
+    rates, cpu_rates, shares = [], [], []
     for r in range(repeats):
         agent = _agent(workload, r + 1)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         in_agent = _run(env, agent, steps)
-        elapsed = time.perf_counter() - t0
+        elapsed, cpu = time.perf_counter() - t0, time.process_time() - c0
         rates.append(steps / elapsed)
+        cpu_rates.append(steps / cpu)
         shares.append(in_agent / elapsed)
     tracemalloc.start()
     _run(env, _agent(workload, 99), min(steps, 600))
@@ -72,7 +76,8 @@ def _measure(workload: str, backend: str, steps: int, repeats: int, core: int,
     tracemalloc.stop()
     env.close()
     rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # KiB on Linux
-    result.put((rates, statistics.median(shares), rss_mb, traced_peak / 2**20))
+    result.put((rates, statistics.median(cpu_rates), statistics.median(shares), rss_mb,
+                traced_peak / 2**20))
 
 
 def machine() -> str:
@@ -105,19 +110,19 @@ def main() -> None:
     print(f"machine: {machine()}; load average before: {os.getloadavg()[0]:.2f}")
     print(f"env {args.env}, {args.steps} agent steps × {args.repeats} repeats, one core "
           f"(#{args.core}), every layer drawn\n")
-    print("| workload | steps/s (median) | min – max | time in agent | peak RSS (MB) "
-          "| traced peak (MB) |")
-    print("| --- | ---: | ---: | ---: | ---: | ---: |")
+    print("| workload | steps/s (median) | min – max | steps per CPU-second | time in agent "
+          "| peak RSS (MB) | traced peak (MB) |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: |")
     for workload in args.workloads:
         queue = ctx.Queue()
         p = ctx.Process(target=_measure, args=(workload, args.env, args.steps, args.repeats,
                                                args.core, queue))
         p.start()
-        rates, share, rss, traced = queue.get()
+        rates, cpu_rate, share, rss, traced = queue.get()
         p.join()
         print(f"| {workload} | {statistics.median(rates):,.0f} | "
-              f"{min(rates):,.0f} – {max(rates):,.0f} | {share:.0%} | {rss:,.0f} | "
-              f"{traced:,.1f} |", flush=True)
+              f"{min(rates):,.0f} – {max(rates):,.0f} | {cpu_rate:,.0f} | {share:.0%} | "
+              f"{rss:,.0f} | {traced:,.1f} |", flush=True)
 
 
 if __name__ == "__main__":

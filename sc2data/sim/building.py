@@ -90,9 +90,7 @@ class Building(GameCore):
             return
         self.minerals -= data.minerals
         self.spent += data.minerals
-        b = self._create(u.build_type, PLAYER_SELF, u.tx, u.ty, t)
-        b.prog0, b.pt0 = 0.0, t
-        self.table.build(b)
+        b = self._create(u.build_type, PLAYER_SELF, u.tx, u.ty, t, complete=False)
         self._emit(t, "placed", b)
         self._start_construction(u, b, t)
 
@@ -117,11 +115,7 @@ class Building(GameCore):
         b.prog0, b.pt0, b.prate = 1.0, t, 0.0
         self.table.build(b)
         self._emit(t, "completed", b)
-        self.completed[b.utype] = self.completed.get(b.utype, 0) + 1
-        if b.data.supply_provided:
-            self._recount_supply()
-        if b.utype in (md.BARRACKS, md.CC):
-            self.idle_producers.add(b)
+        self._structure_done(b)
         u = b.builder
         b.builder = None
         if u is not None and u.alive and u.order == CONSTRUCT:

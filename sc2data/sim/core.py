@@ -101,13 +101,11 @@ class GameCore:
         self.patches = [self._create(md.MINERAL, PLAYER_NEUTRAL, x, y) for x, y in md.MINERAL_POS]
         for p in self.patches:
             p.minerals = md.MINERAL_AMOUNT
+        self.completed: dict[int, int] = {}
         self.cc = self._create(md.CC, PLAYER_SELF, *md.CC_POS)
-        self.completed: dict[int, int] = {md.CC: 1}
         rally_patch = self._patch_at(*md.CC_RALLY)
         assert rally_patch is not None
         self.cc.rally = (*md.CC_RALLY, rally_patch)
-        self._recount_supply()
-        self.idle_producers.add(self.cc)
         side = self._rng.choice((-1.0, 1.0))
         cx, cy = md.CC_POS
         scvs = [self._create(md.SCV, PLAYER_SELF, cx + side * dx, cy + dy)
@@ -117,10 +115,14 @@ class GameCore:
             self.idle_workers.add(u)
             self.order_gather(u, rally_patch, 0.0, emit=False)
 
-    def _create(self, utype: int, owner: int, x: float, y: float, t: float = 0.0) -> Unit:
+    def _create(self, utype: int, owner: int, x: float, y: float, t: float = 0.0,
+                complete: bool = True) -> Unit:
+        """A new unit at (x, y) on loop ``t``: finished, or a structure just placed."""
         u = Unit(self._next_tag, self.table.allocate(), utype, owner, x, y)
         self._next_tag += 1
         u.t0 = u.t1 = t
+        if not complete:
+            u.prog0, u.pt0 = 0.0, t
         self.units[u.slot] = u
         self.table.add(u)
         if owner == PLAYER_SELF:
@@ -129,7 +131,17 @@ class GameCore:
             rows, cols = md.footprint_cells(x, y, u.data.footprint)
             self.occupied[rows, cols] = True
             self.grid_version += 1
+            if complete and owner == PLAYER_SELF:
+                self._structure_done(u)
         return u
+
+    def _structure_done(self, b: Unit) -> None:
+        """Count a finished structure: its supply, the Barracks' requirement, idle production."""
+        self.completed[b.utype] = self.completed.get(b.utype, 0) + 1
+        if b.data.supply_provided:
+            self._recount_supply()
+        if b.utype in (md.BARRACKS, md.CC):
+            self.idle_producers.add(b)
 
     def _value(self, u: Unit, sign: int) -> None:
         v = sign * u.data.minerals
@@ -217,7 +229,14 @@ class GameCore:
     # ------------------------------------------------------------------ motion
 
     def _move(self, u: Unit, t: float, x: float, y: float, extra: float = 0.0) -> float:
-        """Start ``u`` walking to (x, y); returns the arrival loop (``extra`` loops added)."""
+        """Start ``u`` walking to (x, y); returns the arrival loop (``extra`` loops added).
+
+        Targets outside the playable area are pulled to its edge, where the game stops units.
+        """
+        r = u.data.radius
+        x0, y0, x1, y1 = md.PLAYABLE
+        x = min(max(x, x0 + r), x1 - r)
+        y = min(max(y, y0 + r), y1 - r)
         sx, sy = u.pos(t)
         d = math.hypot(x - sx, y - sy)
         u.x0, u.y0, u.t0 = sx, sy, t

@@ -87,7 +87,6 @@ def test_marine_takes_400_loops_and_scores() -> None:
     env, _ = new_env()
     g = env.game
     rax = g._create(md.BARRACKS, 1, *BARRACKS_SITE)
-    g.idle_producers.add(rax)
     g.minerals = 500
     step(env)  # draw it: clicks hit what the last observation showed
     select(env, rax)

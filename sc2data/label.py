@@ -99,6 +99,7 @@ class LabelSummary:
                  ("(two or more rules fired)", "", self.multi)]
         w0 = max(len(r[0]) for r in rows + [("command", "", 0)])
         w1 = max(len(r[1]) for r in rows + [("", "rule id", 0)])
+
         def rate(n: int) -> str:
             return f"{100 * n / self.stacks:7.3f}%" if self.stacks else "      -"
 

@@ -88,11 +88,119 @@ def render(
     typer.echo(f"wrote {path}")
 
 
+@app.command()
+def rollout(
+    out: Path = typer.Option(..., "--out", help="Dataset folder (created; rerun to resume)."),
+    env: Optional[str] = typer.Option(None, help="Backend: sim (embedded simulator, default) or "
+                                                 "sc2 (the real game)."),
+    agent: Optional[str] = typer.Option(None, help="Agent: reduced-random (default), random or "
+                                                   "scripted."),
+    episodes: Optional[int] = typer.Option(None, help="Episodes to play [default: 1]."),
+    seed: Optional[int] = typer.Option(None, help="Root seed; episode e is seeded from (seed, e) "
+                                                  "[default: 0]."),
+    layers: Optional[str] = typer.Option(None, help="Layer set: paper (13+7, default) or full "
+                                                    "(27+11)."),
+    recipe: Optional[Path] = typer.Option(None, help="Take the settings above from a recipe "
+                                                     "(manifests/*.toml)."),
+    workers: int = typer.Option(1, help="Worker processes (the data does not depend on it)."),
+    episodes_per_shard: int = typer.Option(8, help="Episodes per shard file."),
+    max_steps: Optional[int] = typer.Option(None, help="Cut episodes after this many steps."),
+    progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",
+                                            help="Progress bar (default: on a terminal)."),
+) -> None:
+    """Play episodes and store every 2-frame stack in sharded, checksummed HDF5."""
+    from sc2data.errors import Sc2DataError
+    from sc2data.rollout import RolloutConfig
+    from sc2data.rollout import rollout as run
+
+    given = {k: v for k, v in {"env": env, "agent": agent, "episodes": episodes, "seed": seed,
+                               "layers": layers}.items() if v is not None}
+    extra = {"episodes_per_shard": episodes_per_shard, "max_steps": max_steps}
+    if recipe is not None:
+        from sc2data.recipe import load
+
+        if given:
+            raise Sc2DataError(f"--{next(iter(given))} conflicts with --recipe; change the "
+                               f"recipe instead")
+        config = RolloutConfig.from_recipe(load(recipe), **extra)
+    else:
+        config = RolloutConfig(**given, **extra)
+    s = run(config, out, workers=workers, progress=progress)
+    typer.echo(f"{s.out}: {s.episodes} episodes, {s.steps:,} stacks in {s.seconds:.1f} s "
+               f"({s.shards_written} shards written, {s.shards_kept} kept)")
+
+
+@app.command()
+def pair(
+    recipe: Path = typer.Argument(..., help="Recipe (manifests/*.toml)."),
+    data: Path = typer.Option(..., "--data", help="Labelled dataset folder (sc2data rollout, "
+                                                  "then sc2data label)."),
+    out: Optional[Path] = typer.Option(None, "--out", help="Pair-set folder [default: "
+                                                           "DATA/pairs-<recipe name>]."),
+    progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",
+                                            help="Progress bar (default: on a terminal)."),
+) -> None:
+    """Draw the recipe's matched, mismatched and null pairs; pack the stacks of each split."""
+    from sc2data.pairset import make_pairset
+    from sc2data.recipe import load
+
+    r = load(recipe)
+    s = make_pairset(r, data, out or data / f"pairs-{r.name}", progress=progress)
+    typer.echo(("pair set is up to date (same recipe, same labels): " if s.up_to_date else
+                f"pair set written in {s.seconds:.1f} s: ") + str(s.out))
+    typer.echo(s.table())
+
+
+@app.command()
+def build(
+    recipe: Path = typer.Argument(..., help="Recipe (manifests/*.toml)."),
+    out: Path = typer.Option(..., "--out", help="Build folder (created; rerun to resume)."),
+    workers: int = typer.Option(2, help="Rollout worker processes (the data does not depend "
+                                        "on it)."),
+    progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",
+                                            help="Progress bars (default: on a terminal)."),
+) -> None:
+    """Run a recipe end to end: rollout → label → pair, resuming whatever is already done."""
+    from sc2data.build import PAIRS_DIR, build as run
+    from sc2data.recipe import load
+
+    report = run(load(recipe), out, workers=workers, progress=progress)
+    for line in report.lines:
+        typer.echo(line)
+    typer.echo(report.table())
+    typer.echo(f"train with: sc2data train {out / PAIRS_DIR} --out RUN")
+
+
+@app.command()
+def info(folder: Path = typer.Argument(..., help="Dataset folder.")) -> None:
+    """Episodes, frames, bytes, the schema and per-shard figures of a dataset."""
+    from sc2data.audit import info as report
+
+    for line in report(folder):
+        typer.echo(line)
+
+
+@app.command()
+def verify(folder: Path = typer.Argument(..., help="Dataset folder.")) -> None:
+    """Check every checksum, sha256, schema and the index; exit 1 on any fault."""
+    from sc2data.audit import verify as check
+
+    faults = check(folder)
+    for fault in faults:
+        typer.echo(f"FAULT {fault}", err=True)
+    if faults:
+        typer.echo(f"sc2data: {folder}: {len(faults)} fault(s)", err=True)
+        raise typer.Exit(1)
+    typer.echo(f"{folder}: OK")
+
+
 def main(argv: list[str] | None = None) -> None:
     """Console entry point: user errors become one line on stderr and exit status 2."""
     command = typer.main.get_command(app)
     try:
-        command.main(args=argv, prog_name="sc2data", standalone_mode=False)
+        rc = command.main(args=argv, prog_name="sc2data", standalone_mode=False)
+        if isinstance(rc, int) and rc:  # click returns typer.Exit(code) here, not raising it
+            sys.exit(rc)
     except typer.Exit as e:
         sys.exit(e.exit_code)
     except typer.Abort:

@@ -1,0 +1,316 @@
+"""A dataset folder, and reading 2-frame stacks from it without h5py fancy indexing.
+
+A folder holds ``dataset.json`` (settings, schema, codec, versions), the shards
+``shard-NNNNN.h5`` (:mod:`sc2data.storage`) and ``index.parquet``: one row per episode with its
+shard, frame and step offsets, and the shard's sha256 and size. The index is written last,
+atomically, so its presence means the rollout finished.
+
+Reads go chunk by chunk: a batch of (episode, step) requests is sorted into the chunks it
+touches, each chunk of each key is fetched and decoded once (or taken from an LRU cache of
+decoded chunks), and the stacks are gathered in numpy.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections import OrderedDict
+from collections.abc import Iterable, Iterator, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from sc2data.errors import Sc2DataError
+from sc2data.schema import Schema, SchemaError, StackBatch
+from sc2data.storage import Shard, fsync_path
+
+DATASET_FORMAT = "sc2data-dataset"
+DATASET_FORMAT_VERSION = 1
+MANIFEST = "dataset.json"
+INDEX = "index.parquet"
+PARTIAL = ".partial"
+INDEX_SCHEMA = pa.schema([
+    ("shard", pa.string()), ("episode", pa.int64()), ("n_steps", pa.int64()),
+    ("frame_start", pa.int64()), ("step_start", pa.int64()), ("env_seed", pa.int64()),
+    ("agent_seed", pa.int64()), ("reward", pa.float64()), ("shard_sha256", pa.string()),
+    ("shard_bytes", pa.int64()),
+])
+"""One row per episode. ``frame_start``/``step_start`` locate it inside its shard."""
+
+
+def shard_name(i: int) -> str:
+    return f"shard-{i:05d}.h5"
+
+
+def write_atomic(path: Path, data: bytes) -> None:
+    """Write ``path`` so that it is either absent, old, or complete: temp file, fsync, rename."""
+    tmp = path.with_name(path.name + PARTIAL)
+    with open(tmp, "wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+    fsync_path(path.parent)
+
+
+def write_manifest(folder: Path, manifest: dict[str, Any]) -> None:
+    write_atomic(folder / MANIFEST, (json.dumps(manifest, indent=2, sort_keys=True) + "\n").encode())
+
+
+def write_index(folder: Path, rows: Sequence[dict[str, Any]]) -> None:
+    table = pa.Table.from_pylist(sorted(rows, key=lambda r: r["episode"]), schema=INDEX_SCHEMA)
+    sink = pa.BufferOutputStream()
+    pq.write_table(table, sink)
+    write_atomic(folder / INDEX, sink.getvalue().to_pybytes())
+
+
+def read_manifest(folder: Path) -> dict[str, Any]:
+    """``dataset.json``; a folder without one is not an sc2data dataset."""
+    path = Path(folder) / MANIFEST
+    if not Path(folder).is_dir():
+        raise Sc2DataError(f"{folder} is not a folder")
+    if not path.is_file():
+        raise Sc2DataError(f"{folder} is not an sc2data dataset (no {MANIFEST}); make one with "
+                           f"`sc2data rollout --out {folder}`")
+    try:
+        manifest = json.loads(path.read_text())
+    except (OSError, ValueError) as e:
+        raise Sc2DataError(f"{path} is unreadable ({e}); delete the folder and roll out again")
+    if not isinstance(manifest, dict) or manifest.get("format") != DATASET_FORMAT:
+        raise Sc2DataError(f"{path} is not an sc2data dataset manifest")
+    if manifest.get("format_version") != DATASET_FORMAT_VERSION:
+        raise Sc2DataError(f"{path} has dataset format {manifest.get('format_version')}, not "
+                           f"{DATASET_FORMAT_VERSION}; regenerate it with this sc2data")
+    return manifest
+
+
+def read_index(folder: Path) -> pa.Table:
+    path = Path(folder) / INDEX
+    if not path.is_file():
+        raise Sc2DataError(f"{folder} is an unfinished rollout (no {INDEX}); rerun the same "
+                           f"`sc2data rollout` command to finish it")
+    try:
+        table = pq.read_table(path)
+    except (OSError, pa.ArrowException) as e:
+        raise Sc2DataError(f"{path} is unreadable ({e}); rerun the rollout to rewrite it")
+    missing = set(INDEX_SCHEMA.names) - set(table.column_names)
+    if missing:
+        raise Sc2DataError(f"{path} lacks columns {sorted(missing)}; rerun the rollout")
+    return table
+
+
+def manifest_schema(manifest: dict[str, Any], where: Path) -> Schema:
+    try:
+        return Schema.from_dict(manifest["schema"])
+    except (SchemaError, KeyError, ValueError) as e:
+        raise Sc2DataError(f"{where}: {e}") from None
+
+
+class _ChunkCache:
+    """Decoded chunks (immutable bytes), least recently used out first, bounded in bytes."""
+
+    def __init__(self, max_bytes: int) -> None:
+        self.max_bytes = max_bytes
+        self.bytes = 0
+        self._items: OrderedDict[tuple[int, str, int], bytes] = OrderedDict()
+
+    def get(self, key: tuple[int, str, int]) -> bytes | None:
+        item = self._items.get(key)
+        if item is not None:
+            self._items.move_to_end(key)
+        return item
+
+    def put(self, key: tuple[int, str, int], value: bytes) -> None:
+        if len(value) > self.max_bytes or key in self._items:
+            return
+        self._items[key] = value
+        self.bytes += len(value)
+        while self.bytes > self.max_bytes:
+            _, old = self._items.popitem(last=False)
+            self.bytes -= len(old)
+
+
+class Dataset:
+    """Stacks of a finished rollout folder, by (episode, step); see :func:`open_dataset`."""
+
+    def __init__(self, folder: Path, cache_bytes: int = 128 << 20, max_open: int = 64) -> None:
+        self.folder = Path(folder)
+        self.manifest = read_manifest(self.folder)
+        self.schema = manifest_schema(self.manifest, self.folder / MANIFEST)
+        self.index = read_index(self.folder)
+        cols = {c: self.index.column(c).to_numpy() for c in
+                ("episode", "n_steps", "frame_start", "step_start")}
+        order = np.argsort(cols["episode"], kind="stable")
+        self.episode_ids: np.ndarray = cols["episode"][order]
+        """Episode ids, ascending."""
+        self.n_steps: np.ndarray = cols["n_steps"][order]
+        """Steps (= stacks) of each episode, aligned with :attr:`episode_ids`."""
+        self._frame_start = cols["frame_start"][order]
+        self._step_start = cols["step_start"][order]
+        names = np.asarray(self.index.column("shard").to_pylist(), dtype=object)[order]
+        self.shard_names: list[str] = sorted(set(names))
+        self._shard_of = np.searchsorted(np.asarray(self.shard_names, dtype=object), names)
+        self._stack_offsets = np.concatenate([[0], np.cumsum(self.n_steps)])
+        self._cache = _ChunkCache(cache_bytes)
+        self._frame_layout: dict[str, tuple[tuple[int, ...], np.dtype]] = {
+            l.key: ((self.schema.size(l.group),) * 2, l.dtype) for l in self.schema.layers}
+        self._frame_layout.update({v.name: ((v.size,), v.dtype) for v in self.schema.vectors})
+        self._max_open = max_open
+        self._open: OrderedDict[int, Shard] = OrderedDict()
+        self._steps: dict[int, dict[str, np.ndarray]] = {}
+
+    # -- bookkeeping --------------------------------------------------------------------------
+    def __len__(self) -> int:
+        """Number of stacks (agent steps) in the dataset."""
+        return int(self._stack_offsets[-1])
+
+    def __repr__(self) -> str:
+        return (f"Dataset({str(self.folder)!r}, episodes={len(self.episode_ids)}, "
+                f"stacks={len(self)}, layers={len(self.schema.layers)})")
+
+    def __enter__(self) -> Dataset:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        for shard in self._open.values():
+            shard.close()
+        self._open.clear()
+
+    @property
+    def settings(self) -> dict[str, Any]:
+        return dict(self.manifest["settings"])
+
+    def _shard(self, i: int) -> Shard:
+        shard = self._open.get(i)
+        if shard is None:
+            shard = Shard(self.folder / self.shard_names[i])
+            self._open[i] = shard
+            if len(self._open) > self._max_open:
+                self._open.popitem(last=False)[1].close()
+        else:
+            self._open.move_to_end(i)
+        return shard
+
+    def _rows(self, episodes: np.ndarray, steps: np.ndarray) -> np.ndarray:
+        rows = np.searchsorted(self.episode_ids, episodes)
+        rows = np.minimum(rows, len(self.episode_ids) - 1)
+        bad = self.episode_ids[rows] != episodes
+        if bad.any():
+            raise KeyError(f"episode {int(episodes[bad][0])} is not in {self.folder}")
+        out = (steps < 0) | (steps >= self.n_steps[rows])
+        if out.any():
+            i = int(np.flatnonzero(out)[0])
+            raise IndexError(f"step {int(steps[i])} is outside episode {int(episodes[i])} "
+                             f"(0..{int(self.n_steps[rows[i]]) - 1})")
+        return rows
+
+    def _keys(self, keys: Iterable[str] | None) -> list[str]:
+        known = self.schema.keys()
+        if keys is None:
+            return list(known)
+        keys = list(keys)
+        for k in keys:
+            if k not in known:
+                raise KeyError(f"{k!r} is not stored in {self.folder}; stored: {', '.join(known)}")
+        return keys
+
+    # -- reading ------------------------------------------------------------------------------
+    def _gather(self, si: int, key: str, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(buffer, rows): ``buffer[rows]`` are frames ``frames`` of shard ``si``'s ``key``.
+
+        Each chunk is decoded once per call, or taken from the cache of decoded chunks.
+        """
+        src = self._shard(si).frames(key)
+        c = src.chunk_frames
+        ids, inverse = np.unique(frames // c, return_inverse=True)
+        cache = self._cache
+        datas: list[bytes | None] = [cache.get((si, key, i)) for i in ids.tolist()]
+        missing = [j for j, d in enumerate(datas) if d is None]
+        if missing:
+            for j, data in zip(missing, src.read_chunks(ids[missing]), strict=True):
+                datas[j] = data
+                cache.put((si, key, int(ids[j])), data)
+        buf = np.frombuffer(datas[0] if len(datas) == 1 else b"".join(datas),  # type: ignore[arg-type]
+                            src.dtype).reshape(-1, *src.frame_shape)
+        return buf, inverse.reshape(-1) * c + frames % c
+
+    def read(self, episodes: Sequence[int] | np.ndarray, steps: Sequence[int] | np.ndarray,
+             keys: Iterable[str] | None = None) -> StackBatch:
+        """Stacks ``(episodes[i], steps[i])`` for all i, as one :class:`StackBatch`."""
+        episodes = np.asarray(episodes, np.int64).reshape(-1)
+        steps = np.asarray(steps, np.int64).reshape(-1)
+        if episodes.shape != steps.shape:
+            raise ValueError("episodes and steps must have the same length")
+        keys = self._keys(keys)
+        rows = self._rows(episodes, steps)
+        first = self._frame_start[rows] + steps
+        shard_of = self._shard_of[rows]
+        shards = np.unique(shard_of)
+        out: dict[str, np.ndarray] = {}
+        for k in keys:
+            shape, dtype = self._frame_layout[k]
+            out[k] = np.empty((len(rows), 2, *shape), dtype)
+        for si in shards.tolist():
+            sel = None if len(shards) == 1 else np.flatnonzero(shard_of == si)
+            f = first if sel is None else first[sel]
+            need = np.stack([f, f + 1], axis=1).reshape(-1)  # (previous, current) interleaved
+            for k in keys:
+                buf, at = self._gather(si, k, need)
+                flat = out[k].reshape(-1, *buf.shape[1:])
+                if sel is None:
+                    np.take(buf, at, axis=0, out=flat, mode="clip")
+                else:
+                    flat[np.stack([2 * sel, 2 * sel + 1], axis=1).reshape(-1)] = buf[at]
+        return StackBatch(out, self.schema)
+
+    def stack(self, episode: int, step: int, keys: Iterable[str] | None = None) -> StackBatch:
+        """One stack (a batch of size 1): frames ``step`` and ``step + 1`` of ``episode``."""
+        return self.read([episode], [step], keys)
+
+    def locate(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
+        """(episodes, steps) of the stacks at global positions ``[start, stop)``, in order."""
+        pos = np.arange(start, stop, dtype=np.int64)
+        rows = np.searchsorted(self._stack_offsets, pos, side="right") - 1
+        return self.episode_ids[rows], pos - self._stack_offsets[rows]
+
+    def iter_batches(self, batch_size: int = 1024, keys: Iterable[str] | None = None
+                     ) -> Iterator[tuple[np.ndarray, np.ndarray, StackBatch]]:
+        """Every stack in (episode, step) order: ``(episodes, steps, StackBatch)`` per batch."""
+        if batch_size < 1:
+            raise ValueError("batch_size must be at least 1")
+        keys = self._keys(keys)
+        for start in range(0, len(self), batch_size):
+            episodes, steps = self.locate(start, min(start + batch_size, len(self)))
+            yield episodes, steps, self.read(episodes, steps, keys)
+
+    def actions(self, episodes: Sequence[int] | np.ndarray, steps: Sequence[int] | np.ndarray
+                ) -> dict[str, np.ndarray]:
+        """The action taken in each stack (pysc2 ``function`` id, flattened ``args``) and the
+        ``reward`` it returned; :func:`sc2data.storage.function_call` rebuilds the call."""
+        episodes = np.asarray(episodes, np.int64).reshape(-1)
+        steps = np.asarray(steps, np.int64).reshape(-1)
+        rows = self._rows(episodes, steps)
+        at = self._step_start[rows] + steps
+        shard_of = self._shard_of[rows]
+        out: dict[str, np.ndarray] = {}
+        for si in np.unique(shard_of):
+            if int(si) not in self._steps:
+                self._steps[int(si)] = self._shard(int(si)).steps()
+            table = self._steps[int(si)]
+            sel = np.flatnonzero(shard_of == si)
+            for k, v in table.items():
+                if k not in out:
+                    out[k] = np.empty((len(rows), *v.shape[1:]), v.dtype)
+                out[k][sel] = v[at[sel]]
+        return out
+
+
+def open_dataset(folder: str | os.PathLike[str], cache_bytes: int = 128 << 20) -> Dataset:
+    """Open a finished rollout folder for reading (no PyTorch needed)."""
+    return Dataset(Path(folder), cache_bytes=cache_bytes)

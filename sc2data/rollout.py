@@ -1,0 +1,484 @@
+"""``sc2data rollout``: agents play BuildMarines and their 2-frame stacks stream into shards.
+
+Shard ``i`` holds episodes ``[i·E, (i+1)·E)`` and episode ``e`` is seeded from ``(seed, e)``
+alone, so the data never depends on the number of workers. K worker processes each write whole
+shards as ``*.h5.partial`` and rename them when complete and fsynced; the parent shows one progress
+bar fed by the workers through a queue, and writes ``index.parquet`` last. Rerunning the same
+command after an interruption (Ctrl-C, ``kill -9``) deletes stale partials, keeps the complete
+shards and finishes the rest; other settings in the same folder are refused.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import fcntl
+import functools
+import multiprocessing as mp
+import os
+import queue
+import random
+import shutil
+import signal
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sc2data import env as envs
+from sc2data.chunks import Codec
+from sc2data.dataset import (DATASET_FORMAT, DATASET_FORMAT_VERSION, MANIFEST, PARTIAL,
+                             read_manifest, shard_name, write_index, write_manifest)
+from sc2data.errors import Sc2DataError
+from sc2data.provenance import versions
+from sc2data.schema import Schema
+from sc2data.storage import Shard, ShardWriter, fsync_path, sha256_file
+
+EnvFactory = Callable[[int], Any]
+"""``seed -> environment.Base`` (a pysc2 environment) for one episode."""
+AgentFactory = Callable[[int], Any]
+"""``seed -> pysc2 BaseAgent`` for one episode."""
+AGENTS: tuple[str, ...] = ("reduced-random", "random", "scripted")
+LAYER_SETS: tuple[str, ...] = ("paper", "full")
+
+
+@dataclass(frozen=True)
+class RolloutConfig:
+    """Everything that decides a rollout's data (the number of workers does not)."""
+
+    env: str = "sim"
+    """Backend: ``sim`` (embedded simulator) or ``sc2`` (the real game through pysc2)."""
+    agent: str = "reduced-random"
+    """Agent name for ``sc2data.agents.make_agent``."""
+    episodes: int = 1
+    """Episodes to play."""
+    seed: int = 0
+    """Root seed; episode ``e`` is seeded from ``SeedSequence(seed, spawn_key=(e,))``."""
+    layers: str = "paper"
+    """Layer set: ``paper`` (13 screen + 7 minimap) or ``full`` (27 + 11)."""
+    episodes_per_shard: int = 8
+    """Episodes per shard file: bounds a shard to ~8 × 1,801 frames (≈15 MB at 1 KB/frame)."""
+    max_steps: int | None = None
+    """Cut episodes after this many steps (None: play to the end, 1,800 steps on BuildMarines)."""
+    step_mul: int = envs.STEP_MUL
+    """Game loops per agent step."""
+    recipe: str | None = None
+    """The recipe (``manifests/*.toml``) these settings came from, if any."""
+    codec: Codec = field(default_factory=Codec)
+    """Chunking and compression of frame datasets."""
+
+    def validate(self) -> None:
+        """Raise :class:`Sc2DataError` on settings no rollout can run with."""
+        if self.env not in envs.BACKENDS:
+            raise Sc2DataError(f"unknown environment {self.env!r}; choose one of: "
+                               f"{', '.join(envs.BACKENDS)}")
+        if self.layers not in LAYER_SETS:
+            raise Sc2DataError(f"unknown layer set {self.layers!r}; choose one of: "
+                               f"{', '.join(LAYER_SETS)}")
+        for name in ("episodes", "episodes_per_shard"):
+            if getattr(self, name) < 1:
+                raise Sc2DataError(f"{name.replace('_', '-')} must be at least 1, "
+                                   f"not {getattr(self, name)}")
+        if self.step_mul < 1:
+            raise Sc2DataError(f"step-mul must be at least 1, not {self.step_mul}")
+        if self.max_steps is not None and self.max_steps < 1:
+            raise Sc2DataError(f"max-steps must be at least 1, not {self.max_steps}")
+        if not 0 <= self.seed < 2**63:
+            raise Sc2DataError(f"seed must be a non-negative integer, not {self.seed}")
+        if not (1 <= self.codec.chunk_frames <= 1024 and 1 <= self.codec.level <= 22):
+            raise Sc2DataError(f"bad codec settings {self.codec}")
+
+    @classmethod
+    def from_recipe(cls, recipe: Any, **overrides: Any) -> RolloutConfig:
+        """The rollout settings of a parsed recipe (:func:`sc2data.recipe.load`)."""
+        r = recipe.rollout
+        return cls(env=r.env, agent=r.agent, episodes=r.episodes, seed=recipe.seed,
+                   layers=r.layers, step_mul=r.step_mul, recipe=recipe.name, **overrides)
+
+    @property
+    def schema(self) -> Schema:
+        return Schema.named(self.layers)
+
+    @property
+    def n_shards(self) -> int:
+        return -(-self.episodes // self.episodes_per_shard)
+
+    def shard_episodes(self, i: int) -> range:
+        e = self.episodes_per_shard
+        return range(i * e, min((i + 1) * e, self.episodes))
+
+    def settings(self) -> dict[str, Any]:
+        """JSON form, recorded in ``dataset.json`` and in every shard."""
+        d = asdict(self)
+        d["codec"] = self.codec.to_dict()
+        return d
+
+
+def episode_seeds(seed: int, episode: int) -> tuple[int, int]:
+    """(environment seed, agent seed) of an episode, from the root seed and its index only."""
+    s = np.random.SeedSequence(seed, spawn_key=(episode,)).generate_state(2, np.uint32)
+    return int(s[0] >> 1), int(s[1] >> 1)  # 31-bit: what SC2's random_seed accepts
+
+
+def default_env_factory(config: RolloutConfig) -> EnvFactory:
+    return functools.partial(_make_env, config.env, config.step_mul)
+
+
+def _make_env(backend: str, step_mul: int, seed: int) -> Any:
+    return envs.make_env(backend, seed=seed, step_mul=step_mul)
+
+
+def _make_agent(name: str, seed: int) -> Any:
+    try:
+        from sc2data.agents import make_agent
+    except ImportError:
+        raise Sc2DataError("the agents module is missing from this sc2data install") from None
+    return make_agent(name, seed=seed)
+
+
+def default_agent_factory(config: RolloutConfig) -> AgentFactory:
+    return functools.partial(_make_agent, config.agent)
+
+
+# -- one shard ----------------------------------------------------------------------------------
+def play_episode(env: Any, agent: Any, schema: Schema, writer: ShardWriter,
+                 max_steps: int | None, report: Callable[[int], None]) -> int:
+    """Play one episode into ``writer``: frame 0, then (action, frame t+1, reward) per step."""
+    timestep = env.reset()[0]
+    agent.reset()
+    writer.add_frame(schema.extract(timestep.observation))
+    steps = unreported = 0
+    while not timestep.last() and (max_steps is None or steps < max_steps):
+        call = agent.step(timestep)
+        timestep = env.step([call])[0]
+        writer.add_frame(schema.extract(timestep.observation))
+        writer.add_step(int(call.function), call.arguments, timestep.reward)
+        steps += 1
+        unreported += 1
+        if unreported == 200:
+            report(unreported)
+            unreported = 0
+    report(unreported)
+    return steps
+
+
+def shard_attrs(config: RolloutConfig, i: int) -> dict[str, Any]:
+    span = config.shard_episodes(i)
+    return {"settings": config.settings(), "versions": versions(), "backend": config.env,
+            "map": envs.MAP_NAME, "agent": config.agent, "seed": config.seed,
+            "layers": config.layers, "recipe": config.recipe or "",
+            "episode_start": span.start, "episode_stop": span.stop}
+
+
+def index_rows(path: Path) -> list[dict[str, Any]]:
+    """Index rows of a complete shard: its episode table plus the file's sha256 and size."""
+    shard = Shard(path)
+    try:
+        table = shard.episodes
+    finally:
+        shard.close()
+    digest, size = sha256_file(path), path.stat().st_size
+    return [{"shard": path.name, **{c: (float(v[j]) if c == "reward" else int(v[j]))
+                                    for c, v in table.items()},
+             "shard_sha256": digest, "shard_bytes": size} for j in range(len(table["episode"]))]
+
+
+def write_shard(config: RolloutConfig, out: Path, i: int, env_factory: EnvFactory,
+                agent_factory: AgentFactory, report: Callable[[int], None]) -> None:
+    """Play shard ``i``'s episodes into ``shard-i.h5.partial``, then give it its final name."""
+    final = out / shard_name(i)
+    partial = final.with_name(final.name + PARTIAL)
+    schema = config.schema
+    writer = ShardWriter(partial, schema, config.codec, shard_attrs(config, i))
+    try:
+        for episode in config.shard_episodes(i):
+            env_seed, agent_seed = episode_seeds(config.seed, episode)
+            # Agents that draw from the global generators (pysc2's RandomAgent) are seeded too.
+            random.seed(agent_seed)
+            np.random.seed(agent_seed)
+            env = env_factory(env_seed)
+            try:
+                agent = agent_factory(agent_seed)
+                agent.setup(env.observation_spec()[0], env.action_spec()[0])
+                writer.begin_episode(episode, env_seed, agent_seed)
+                play_episode(env, agent, schema, writer, config.max_steps, report)
+                writer.end_episode()
+            finally:
+                env.close()
+        writer.close()
+    except BaseException:
+        writer.abort()
+        partial.unlink(missing_ok=True)
+        raise
+    os.replace(partial, final)
+    fsync_path(out)
+
+
+# -- the folder ---------------------------------------------------------------------------------
+def manifest_for(config: RolloutConfig) -> dict[str, Any]:
+    return {"format": DATASET_FORMAT, "format_version": DATASET_FORMAT_VERSION,
+            "settings": config.settings(), "schema": config.schema.to_dict(),
+            "versions": versions(), "map": envs.MAP_NAME, "n_shards": config.n_shards}
+
+
+def _differences(a: dict[str, Any], b: dict[str, Any]) -> list[str]:
+    return sorted(k for k in set(a) | set(b) if a.get(k) != b.get(k))
+
+
+def check_folder(config: RolloutConfig, out: Path) -> None:
+    """Refuse a file, a foreign folder, or a dataset made with other settings."""
+    if out.exists() and not out.is_dir():
+        raise Sc2DataError(f"output {out} exists and is not a folder; choose another --out")
+    if out.is_dir() and (out / MANIFEST).exists():
+        old = read_manifest(out)
+        diff = _differences(old.get("settings", {}), config.settings())
+        if diff:
+            raise Sc2DataError(f"{out} holds a dataset made with other settings (differs in: "
+                               f"{', '.join(diff)}); use another --out or delete it")
+    elif out.is_dir() and any(p.name != LOCK for p in out.iterdir()):
+        raise Sc2DataError(f"output folder {out} is not empty and is not an sc2data dataset; "
+                           f"choose an empty or new folder")
+
+
+def create_folder(out: Path) -> None:
+    """Make ``out`` (and its parents) and prove it writable; undo on failure."""
+    made = not out.exists()
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = out / f".write-test{PARTIAL}"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as e:
+        if made and out.is_dir():
+            with contextlib.suppress(OSError):
+                out.rmdir()
+        raise Sc2DataError(f"cannot write to output folder {out}: {e.strerror or e}") from None
+
+
+def prepare_folder(config: RolloutConfig, out: Path) -> list[int]:
+    """Write the manifest if new; drop stale partials; check complete shards; return the rest."""
+    check_folder(config, out)  # again, under the lock
+    if not (out / MANIFEST).exists():
+        write_manifest(out, manifest_for(config))
+    for stale in out.glob(f"*{PARTIAL}"):
+        stale.unlink()
+    todo = []
+    for i in range(config.n_shards):
+        path = out / shard_name(i)
+        if not path.exists():
+            todo.append(i)
+            continue
+        shard = Shard(path)
+        try:
+            recorded = shard.attrs.get("settings")
+        finally:
+            shard.close()
+        if recorded != config.settings():
+            raise Sc2DataError(f"{path} was written with other settings; delete it (or the "
+                               f"folder) and rerun")
+    return todo
+
+
+LOCK = ".lock"
+_LOCK_WAIT_S = 10.0
+
+
+class FolderLock:
+    """``flock`` on ``out/.lock``. A run holds it exclusively while it prepares the folder, then
+    shared, as its workers do; a second run waits for every process of the first (orphaned
+    workers of a killed run included) and refuses to write the folder alongside it."""
+
+    def __init__(self, out: Path, exclusive: bool) -> None:
+        self.out = out
+        self._fd = os.open(out / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            self._take(fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH)
+        except BaseException:
+            os.close(self._fd)
+            raise
+
+    def _take(self, mode: int) -> None:
+        deadline = time.monotonic() + _LOCK_WAIT_S
+        while True:
+            try:
+                fcntl.flock(self._fd, mode | fcntl.LOCK_NB)
+                return
+            except BlockingIOError:
+                if time.monotonic() > deadline:
+                    raise Sc2DataError(f"another sc2data rollout is writing to {self.out}; wait "
+                                       f"for it to finish or stop it") from None
+                time.sleep(0.05)
+
+    def share(self) -> None:
+        """Downgrade to a shared lock, so that this run's workers can take theirs."""
+        fcntl.flock(self._fd, fcntl.LOCK_SH)
+
+    def __enter__(self) -> FolderLock:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        os.close(self._fd)
+
+
+def _die_with_parent() -> None:
+    """Linux: have the kernel kill this worker when its parent dies (e.g. ``kill -9``)."""
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+
+
+# -- workers ------------------------------------------------------------------------------------
+def _worker(tasks: Any, results: Any, config: RolloutConfig, out: Path, env_factory: EnvFactory,
+            agent_factory: AgentFactory, parent: int) -> None:
+    """A worker process: write shards from ``tasks`` until it gets ``None``."""
+    _die_with_parent()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and stops us
+    if os.getppid() != parent:  # it died before we could ask to die with it
+        os._exit(1)
+
+    def report(n: int) -> None:
+        if os.getppid() != parent:  # orphaned where PR_SET_PDEATHSIG does not exist
+            os._exit(1)
+        results.put(("steps", n))
+
+    with FolderLock(out, exclusive=False):
+        _work(tasks, results, config, out, env_factory, agent_factory, report)
+
+
+def _work(tasks: Any, results: Any, config: RolloutConfig, out: Path, env_factory: EnvFactory,
+          agent_factory: AgentFactory, report: Callable[[int], None]) -> None:
+    while (i := tasks.get()) is not None:
+        try:
+            write_shard(config, out, i, env_factory, agent_factory, report)
+        except BaseException as e:  # noqa: BLE001 - reported to the parent, which fails
+            results.put(("error", i, str(e) if isinstance(e, Sc2DataError)
+                         else f"{type(e).__name__}: {e}"))
+            return
+        results.put(("done", i, None))
+
+
+def _progress(total: int, show: bool | None) -> Any:
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit="step", unit_scale=True, dynamic_ncols=True, smoothing=0.1,
+                disable=None if show is None else not show, desc="rollout")
+
+
+def _run_parallel(config: RolloutConfig, out: Path, todo: list[int], workers: int,
+                  env_factory: EnvFactory, agent_factory: AgentFactory, bar: Any) -> None:
+    # spawn, not forkserver: a forkserver's children are not ours, so they would outlive a
+    # ``kill -9`` of this process; spawned ones are, and die with it (_die_with_parent).
+    ctx = mp.get_context("spawn")
+    tasks, results = ctx.Queue(), ctx.Queue()
+    for i in todo:
+        tasks.put(i)
+    n = min(workers, len(todo))
+    for _ in range(n):
+        tasks.put(None)
+    procs = [ctx.Process(target=_worker, args=(tasks, results, config, out, env_factory,
+                                               agent_factory, os.getpid()), daemon=True)
+             for _ in range(n)]
+    for p in procs:
+        p.start()
+    pending = set(todo)
+    try:
+        while pending:
+            try:
+                msg = results.get(timeout=0.5)
+            except queue.Empty:
+                dead = [p for p in procs if p.exitcode not in (None, 0)]
+                if dead:
+                    raise Sc2DataError(f"a rollout worker died (exit code {dead[0].exitcode}); "
+                                       f"rerun the same command to resume") from None
+                continue
+            if msg[0] == "steps":
+                bar.update(msg[1])
+            elif msg[0] == "done":
+                pending.discard(msg[1])
+            else:
+                raise Sc2DataError(f"rollout of {shard_name(msg[1])} failed: {msg[2]}")
+    finally:
+        for p in procs:
+            if p.is_alive() and pending:
+                p.terminate()
+        for p in procs:
+            p.join()
+        if pending:  # interrupted or failed: leave no half-written shard behind
+            for stale in out.glob(f"*{PARTIAL}"):
+                stale.unlink(missing_ok=True)
+
+
+def _fail_fast(config: RolloutConfig, env_factory: EnvFactory,
+               agent_factory: AgentFactory) -> None:
+    """Make an agent (and a simulator) once here, so that a broken setup fails before any
+    worker starts; the real game is not launched for this (its check is ``sc2_available``)."""
+    try:
+        agent_factory(0)
+        if config.env == "sim":
+            env_factory(0).close()
+    except ImportError as e:
+        raise Sc2DataError(f"this sc2data install is incomplete ({e})") from None
+
+
+@dataclass(frozen=True)
+class RolloutSummary:
+    """What a rollout call did."""
+
+    out: Path
+    shards_written: int
+    shards_kept: int
+    episodes: int
+    steps: int
+    seconds: float
+
+
+def rollout(config: RolloutConfig, out: str | os.PathLike[str], workers: int = 1,
+            progress: bool | None = None, env_factory: EnvFactory | None = None,
+            agent_factory: AgentFactory | None = None) -> RolloutSummary:
+    """Roll out ``config`` into folder ``out`` with ``workers`` processes; resumable.
+
+    ``env_factory``/``agent_factory`` replace the defaults (``make_env(config.env, seed=…)``,
+    ``make_agent(config.agent, seed=…)``); they must be picklable for ``workers > 1``.
+    """
+    out = Path(out)
+    config.validate()
+    if workers < 1:
+        raise Sc2DataError(f"workers must be at least 1, not {workers}")
+    check_folder(config, out)
+    if env_factory is None:
+        if config.env == "sc2" and not envs.sc2_available():
+            envs.make_env("sc2")  # raises the one-line install hint
+        env_factory = default_env_factory(config)
+    if agent_factory is None:
+        if config.agent not in AGENTS:
+            raise Sc2DataError(f"unknown agent {config.agent!r}; choose one of: "
+                               f"{', '.join(AGENTS)}")
+        agent_factory = default_agent_factory(config)
+    started = time.perf_counter()
+    made = not out.exists()
+    create_folder(out)
+    try:
+        _fail_fast(config, env_factory, agent_factory)
+    except BaseException:
+        if made:
+            shutil.rmtree(out, ignore_errors=True)
+        raise
+    with FolderLock(out, exclusive=True) as lock:
+        todo = prepare_folder(config, out)
+        lock.share()
+        per_episode = config.max_steps or envs.EPISODE_STEPS
+        total = sum(len(config.shard_episodes(i)) for i in todo) * per_episode
+        with _progress(total, progress) as bar:
+            if workers == 1 or len(todo) <= 1:
+                for i in todo:
+                    write_shard(config, out, i, env_factory, agent_factory, bar.update)
+            else:
+                _run_parallel(config, out, todo, workers, env_factory, agent_factory, bar)
+            bar.total = bar.n
+            bar.refresh()
+        rows = [row for i in range(config.n_shards) for row in index_rows(out / shard_name(i))]
+        write_index(out, rows)
+    return RolloutSummary(out, len(todo), config.n_shards - len(todo), len(rows),
+                          sum(r["n_steps"] for r in rows), time.perf_counter() - started)

@@ -1,0 +1,337 @@
+"""One shard file: consecutive episodes of frames, actions and rewards, in HDF5.
+
+Layout, all derived from a :class:`~sc2data.schema.Schema`::
+
+    /frames/<key>      (F, …)  one dataset per schema key (``screen/unit_type``, ``player``, …);
+                               episodes back to back, T+1 frames for T steps, each frame once
+    /steps/function    (S,)    pysc2 function id of the action taken between frames t and t+1
+    /steps/args        (S, 5)  its arguments, flattened in pysc2's order, -1 padded
+    /steps/reward      (S,)    the reward the step returned
+    /episodes/<column> (E,)    episode, env_seed, agent_seed, frame_start, step_start, n_steps,
+                               reward
+
+Stack ``t`` of an episode is frames ``frame_start + t`` and ``frame_start + t + 1`` with step
+``step_start + t``. Every dataset is chunked, Zstd-compressed and fletcher32-checksummed
+(:mod:`sc2data.chunks`); the root's attributes describe the shard (schema, versions, settings…).
+Nothing written depends on the time or on the worker that wrote it, so a shard's bytes depend on
+its settings and seeds alone.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import mmap
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from sc2data._pysc2 import actions
+from sc2data.chunks import ChecksumError, ChunkDecoder, ChunkEncoder, Codec, fast_path_ok
+from sc2data.errors import Sc2DataError
+from sc2data.schema import Schema, SchemaError
+
+FORMAT = "sc2data-shard"
+FORMAT_VERSION = 1
+ARG_WIDTH = max(sum(len(a.sizes) for a in f.args) for f in actions.FUNCTIONS)
+"""Widest flattened argument list of any pysc2 function (select_rect: add, x0, y0, x1, y1)."""
+EPISODE_COLUMNS: tuple[str, ...] = ("episode", "env_seed", "agent_seed", "frame_start",
+                                    "step_start", "n_steps", "reward")
+_GROW = 256
+"""Chunks added at a time when a frame dataset must grow."""
+
+
+def flatten_args(function: int, args: Sequence[Sequence[int]]) -> np.ndarray:
+    """A pysc2 FunctionCall's arguments as one ``ARG_WIDTH`` int16 row, -1 padded."""
+    flat = [int(v) for a in args for v in a]
+    if len(flat) > ARG_WIDTH:
+        raise ValueError(f"function {function} has {len(flat)} argument values > {ARG_WIDTH}")
+    return np.array(flat + [-1] * (ARG_WIDTH - len(flat)), np.int16)
+
+
+def function_call(function: int, flat: np.ndarray) -> actions.FunctionCall:
+    """Rebuild the pysc2 ``FunctionCall`` that :func:`flatten_args` stored."""
+    args, i = [], 0
+    for arg in actions.FUNCTIONS[int(function)].args:
+        args.append([int(v) for v in flat[i:i + len(arg.sizes)]])
+        i += len(arg.sizes)
+    return actions.FunctionCall(int(function), args)
+
+
+def fsync_path(path: Path) -> None:
+    """Flush a file (or a folder's entries) to disk."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def sha256_file(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+class ShardWriter:
+    """Streams the episodes of one shard into ``path``; memory use is one chunk of frames.
+
+    Call :meth:`begin_episode`, then :meth:`add_frame` T+1 times and :meth:`add_step` T times,
+    then :meth:`end_episode`; :meth:`close` writes the tables and fsyncs the file.
+    """
+
+    def __init__(self, path: Path, schema: Schema, codec: Codec, attrs: Mapping[str, Any]) -> None:
+        self.path = Path(path)
+        self.schema = schema
+        self.codec = codec
+        self._file = h5py.File(self.path, "w", libver="latest")
+        header = {"format": FORMAT, "format_version": FORMAT_VERSION, "schema": schema.to_dict(),
+                  "schema_version": schema.version, "codec": codec.to_dict()}
+        for k, v in {**header, **attrs}.items():
+            # Integers stay integers for any HDF5 tool; everything else is JSON, unambiguously.
+            self._file.attrs[k] = v if type(v) is int else json.dumps(v)
+        c = codec.chunk_frames
+        self._shapes = {l.key: (schema.size(l.group),) * 2 for l in schema.layers}
+        self._shapes.update({v.name: (v.size,) for v in schema.vectors})
+        self._dtypes = {l.key: l.dtype for l in schema.layers}
+        self._dtypes.update({v.name: v.dtype for v in schema.vectors})
+        self._frames = {k: self._file.create_dataset(
+            f"frames/{k}", shape=(0, *self._shapes[k]), maxshape=(None, *self._shapes[k]),
+            dtype=self._dtypes[k], chunks=(c, *self._shapes[k]), **codec.dataset_kwargs())
+            for k in schema.keys()}
+        self._buffers = {k: np.zeros((c, *self._shapes[k]), self._dtypes[k]) for k in schema.keys()}
+        self._encoder = ChunkEncoder(codec)
+        self._n_frames = 0
+        self._capacity = 0
+        self._functions: list[int] = []
+        self._args: list[np.ndarray] = []
+        self._rewards: list[float] = []
+        self._episodes: list[tuple[int, ...] | tuple[Any, ...]] = []
+        self._current: dict[str, Any] | None = None
+
+    # -- episodes ---------------------------------------------------------------------------
+    def begin_episode(self, episode: int, env_seed: int, agent_seed: int) -> None:
+        if self._current is not None:
+            raise RuntimeError("begin_episode before end_episode")
+        self._current = {"episode": episode, "env_seed": env_seed, "agent_seed": agent_seed,
+                         "frame_start": self._n_frames, "step_start": len(self._functions),
+                         "reward": 0.0}
+
+    def add_frame(self, arrays: Mapping[str, np.ndarray]) -> None:
+        """Append one frame: ``arrays`` holds every schema key (``Schema.extract``'s output)."""
+        slot = self._n_frames % self.codec.chunk_frames
+        for k, buf in self._buffers.items():
+            buf[slot] = arrays[k]
+        self._n_frames += 1
+        if slot == self.codec.chunk_frames - 1:
+            self._flush()
+
+    def add_step(self, function: int, args: Sequence[Sequence[int]], reward: float) -> None:
+        """Record the action taken between the last two frames and the reward it returned."""
+        assert self._current is not None
+        self._functions.append(int(function))
+        self._args.append(flatten_args(function, args))
+        self._rewards.append(float(reward))
+        self._current["reward"] += float(reward)
+
+    def end_episode(self) -> int:
+        """Close the episode; returns its number of steps."""
+        cur = self._current
+        assert cur is not None
+        n_steps = len(self._functions) - cur["step_start"]
+        if self._n_frames - cur["frame_start"] != n_steps + 1:
+            raise RuntimeError("an episode needs exactly one frame more than it has steps")
+        self._episodes.append(tuple(cur[c] if c != "n_steps" else n_steps
+                                    for c in EPISODE_COLUMNS))
+        self._current = None
+        return n_steps
+
+    # -- chunks -----------------------------------------------------------------------------
+    def _flush(self) -> None:
+        """Compress the buffered chunk of every key and write it where it belongs."""
+        c = self.codec.chunk_frames
+        start = ((self._n_frames - 1) // c) * c
+        if start + c > self._capacity:
+            self._capacity += _GROW * c
+            for ds in self._frames.values():
+                ds.resize(self._capacity, axis=0)
+        keys = list(self._buffers)
+        payloads = self._encoder.encode([self._buffers[k] for k in keys])
+        for k, payload in zip(keys, payloads, strict=True):
+            ds = self._frames[k]
+            ds.id.write_direct_chunk((start,) + (0,) * (ds.ndim - 1), payload)
+            self._buffers[k].fill(0)
+
+    def close(self) -> None:
+        """Write the last chunk, the step and episode tables; trim; fsync."""
+        if self._current is not None:
+            raise RuntimeError("close() inside an episode")
+        if self._n_frames % self.codec.chunk_frames:
+            self._flush()
+        for ds in self._frames.values():
+            ds.resize(self._n_frames, axis=0)
+        kw = self.codec.dataset_kwargs()
+        n = len(self._functions)
+        step_chunk = (max(1, min(n, 4096)),)
+        self._file.create_dataset("steps/function", data=np.array(self._functions, np.uint16),
+                                  chunks=step_chunk, **kw)
+        self._file.create_dataset("steps/args", data=np.array(self._args, np.int16).reshape(
+            n, ARG_WIDTH), chunks=(step_chunk[0], ARG_WIDTH), **kw)
+        self._file.create_dataset("steps/reward", data=np.array(self._rewards, np.float32),
+                                  chunks=step_chunk, **kw)
+        table = np.array(self._episodes, dtype=object).reshape(-1, len(EPISODE_COLUMNS))
+        for j, col in enumerate(EPISODE_COLUMNS):
+            dtype = np.float64 if col == "reward" else np.int64
+            self._file.create_dataset(f"episodes/{col}", data=table[:, j].astype(dtype),
+                                      chunks=(max(1, len(table)),), **kw)
+        self._file.attrs["n_frames"] = self._n_frames
+        self._file.attrs["n_steps"] = n
+        self._file.close()
+        fsync_path(self.path)
+
+    def abort(self) -> None:
+        """Close without finishing; the caller deletes the file."""
+        try:
+            self._file.close()
+        except Exception:  # noqa: BLE001 - the file is being thrown away
+            pass
+
+
+def _damaged(path: Path, what: object) -> Sc2DataError:
+    return Sc2DataError(f"{path} is damaged ({what}); delete it and rerun the rollout to "
+                        f"regenerate it, or run `sc2data verify` on its folder")
+
+
+class FrameSource:
+    """Decoded whole chunks of one frame dataset, as bytes.
+
+    Fast path (our Zstd + fletcher32 pipeline): the chunk table comes from one ``chunk_iter``
+    walk, chunks are sliced out of a memory map of the file, their checksums verified in one
+    vectorised pass, then decompressed. Any other pipeline is read through h5py, chunk by chunk.
+    """
+
+    def __init__(self, ds: h5py.Dataset, mm: mmap.mmap | None, where: str) -> None:
+        self.ds = ds
+        self.where = where
+        self.chunk_frames = int(ds.chunks[0])
+        self.n_frames = int(ds.shape[0])
+        self.frame_shape: tuple[int, ...] = tuple(ds.shape[1:])
+        self.dtype = ds.dtype
+        self.chunk_bytes = self.chunk_frames * int(np.prod(self.frame_shape)) * ds.dtype.itemsize
+        self._mm = mm if mm is not None and fast_path_ok(ds) else None
+        self._decoder = ChunkDecoder()
+        self._table: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+
+    def _chunk_table(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """File offset, stored size and filter mask of every chunk, by chunk number."""
+        if self._table is None:
+            n = -(-self.n_frames // self.chunk_frames)
+            offset = np.full(n, -1, np.int64)
+            size = np.zeros(n, np.int64)
+            mask = np.zeros(n, np.int64)
+
+            def visit(info: Any) -> None:
+                j = info.chunk_offset[0] // self.chunk_frames
+                if j < n:
+                    offset[j], size[j], mask[j] = info.byte_offset, info.size, info.filter_mask
+
+            self.ds.id.chunk_iter(visit)
+            if (offset < 0).any() or (size < 5).any():
+                raise ChecksumError(f"{self.where}: {int((offset < 0).sum())} chunk(s) missing")
+            self._table = (offset, size, mask)
+        return self._table
+
+    def read_chunks(self, ids: np.ndarray) -> list[bytes]:
+        """The decoded bytes of chunks ``ids`` (``chunk_bytes`` each, the last zero padded)."""
+        if self._mm is not None:
+            offset, size, mask = self._chunk_table()
+            mm = self._mm
+            raws = [mm[o:o + n] for o, n in zip(offset[ids].tolist(), size[ids].tolist())]
+            return self._decoder.decode(raws, mask[ids].tolist(), self.chunk_bytes, self.where)
+        c, out = self.chunk_frames, []
+        for i in np.asarray(ids).tolist():
+            block = np.zeros((c, *self.frame_shape), self.dtype)
+            part = self.ds[i * c:min((i + 1) * c, self.n_frames)]
+            block[:len(part)] = part
+            out.append(block.tobytes())
+        return out
+
+
+class Shard:
+    """One shard opened read-only: attributes, schema, episode table, frames and steps."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = Path(path)
+        try:
+            self.file = h5py.File(self.path, "r")
+        except OSError as e:
+            raise Sc2DataError(f"{self.path} is not a readable HDF5 file ({_first_line(e)}); "
+                               f"it is truncated or not an sc2data shard") from None
+        try:
+            self.attrs: dict[str, Any] = {k: _attr(v) for k, v in self.file.attrs.items()}
+            if self.attrs.get("format") != FORMAT:
+                raise Sc2DataError(f"{self.path} is not an sc2data shard")
+            if self.attrs.get("format_version") != FORMAT_VERSION:
+                raise Sc2DataError(f"{self.path} has shard format "
+                                   f"{self.attrs.get('format_version')}, not {FORMAT_VERSION}; "
+                                   f"regenerate it with this sc2data")
+            try:
+                self.schema = Schema.from_dict(self.attrs["schema"])
+            except SchemaError as e:
+                raise Sc2DataError(f"{self.path}: {e}") from None
+            self.episodes = {c: self.file[f"episodes/{c}"][:] for c in EPISODE_COLUMNS}
+        except (KeyError, OSError, ValueError) as e:
+            self.file.close()
+            raise _damaged(self.path, _first_line(e)) from None
+        except Sc2DataError:
+            self.file.close()
+            raise
+        self._sources: dict[str, FrameSource] = {}
+        self._mm: mmap.mmap | None = None
+
+    def frames(self, key: str) -> FrameSource:
+        """The chunk reader of frame dataset ``key``."""
+        if key not in self._sources:
+            if self._mm is None:
+                with open(self.path, "rb") as f:
+                    self._mm = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
+            self._sources[key] = FrameSource(self.file[f"frames/{key}"], self._mm,
+                                             f"{self.path.name}:{key}")
+        return self._sources[key]
+
+    def steps(self) -> dict[str, np.ndarray]:
+        """``function`` (S,), ``args`` (S, ARG_WIDTH) and ``reward`` (S,) of every step."""
+        try:
+            return {k: self.file[f"steps/{k}"][:] for k in ("function", "args", "reward")}
+        except OSError as e:
+            raise _damaged(self.path, _first_line(e)) from None
+
+    def close(self) -> None:
+        self._sources.clear()
+        if self._mm is not None:
+            self._mm.close()
+            self._mm = None
+        self.file.close()
+
+
+def _attr(v: Any) -> Any:
+    """An HDF5 attribute as Python: the writer's JSON strings decoded, numpy scalars unwrapped."""
+    if isinstance(v, bytes):
+        v = v.decode()
+    if isinstance(v, str):
+        return json.loads(v)
+    return v.item() if isinstance(v, np.generic) else v
+
+
+def _first_line(e: BaseException) -> str:
+    return str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+
+
+__all__ = ["ARG_WIDTH", "ChecksumError", "FrameSource", "Shard", "ShardWriter", "flatten_args",
+           "function_call", "fsync_path", "sha256_file"]

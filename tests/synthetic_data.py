@@ -1,0 +1,24 @@
+"""Small datasets for the storage and rollout tests, made through the real rollout code path."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from sc2data.chunks import Codec
+from sc2data.rollout import RolloutConfig, RolloutSummary, rollout
+from sc2data.synthetic import pysc2_random_agent, synthetic_env_factory
+
+STEPS = 30
+"""Steps per synthetic episode: 31 frames, so 4-frame chunks straddle episode boundaries."""
+
+
+def config(episodes: int = 5, seed: int = 7, per_shard: int = 2, chunk_frames: int = 4,
+           **kw: object) -> RolloutConfig:
+    return RolloutConfig(env="sim", agent="random", episodes=episodes, seed=seed,
+                         episodes_per_shard=per_shard, codec=Codec(1, chunk_frames), **kw)
+
+
+def make_dataset(out: Path, workers: int = 1, steps: int = STEPS, **kw: object) -> RolloutSummary:
+    """Roll pysc2's RandomAgent out on the synthetic env (pysc2's mock env, moving frames)."""
+    return rollout(config(**kw), out, workers=workers, progress=False,
+                   env_factory=synthetic_env_factory(steps), agent_factory=pysc2_random_agent)

@@ -1,0 +1,165 @@
+"""``sc2data rollout | info | verify`` as a user runs them: exit codes, one-line errors, no debris."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import h5py
+import pytest
+
+from sc2data.cli import main
+from sc2data.dataset import INDEX
+from sc2data.schema import Schema
+from tests.synthetic_data import make_dataset
+from tests.test_storage import flip_byte_in_chunk
+
+
+def cli(args: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+    """Run ``sc2data ARGS``; (exit code, stdout, stderr)."""
+    try:
+        main([str(a) for a in args])
+        code = 0
+    except SystemExit as e:
+        code = int(e.code or 0)
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def assert_one_line_error(code: int, err: str, match: str) -> None:
+    assert code == 2, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("sc2data: error: "), err
+    assert match in lines[0], lines[0]
+    assert "Traceback" not in err
+
+
+@pytest.fixture(scope="module")
+def good(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("cli") / "data"
+    make_dataset(out, episodes=3)
+    return out
+
+
+@pytest.fixture()
+def copy(good: Path, tmp_path: Path) -> Path:
+    """A private copy of the good dataset, to damage."""
+    return Path(shutil.copytree(good, tmp_path / "data"))
+
+
+@pytest.mark.parametrize("args, match", [
+    (["--agent", "clever"], "unknown agent 'clever'"),
+    (["--env", "gym"], "unknown environment 'gym'"),
+    (["--episodes", "0"], "episodes must be at least 1, not 0"),
+    (["--episodes", "-3"], "episodes must be at least 1, not -3"),
+    (["--workers", "0"], "workers must be at least 1"),
+    (["--episodes-per-shard", "0"], "episodes-per-shard must be at least 1"),
+    (["--layers", "some"], "unknown layer set 'some'"),
+    (["--max-steps", "-1"], "max-steps must be at least 1"),
+    (["--episodes", "many"], "Invalid value for '--episodes'"),
+])
+def test_bad_options_fail_in_one_line_and_write_nothing(
+        args: list[str], match: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "out"
+    code, _, err = cli(["rollout", "--out", out, *args], capsys)
+    assert_one_line_error(code, err, match)
+    assert not out.exists()
+
+
+def test_unwritable_output_folder(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    code, _, err = cli(["rollout", "--out", blocker / "out"], capsys)
+    assert_one_line_error(code, err, "cannot write to output folder")
+    code, _, err = cli(["rollout", "--out", blocker], capsys)
+    assert_one_line_error(code, err, "exists and is not a folder")
+    assert blocker.read_text() == "x"
+
+
+def test_foreign_output_folder(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "notes.txt").write_text("mine")
+    code, _, err = cli(["rollout", "--out", tmp_path], capsys)
+    assert_one_line_error(code, err, "is not empty and is not an sc2data dataset")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
+
+
+def test_recipe_settings_cannot_be_overridden(tmp_path: Path,
+                                              capsys: pytest.CaptureFixture[str]) -> None:
+    recipe = Path(__file__).resolve().parents[1] / "manifests" / "smoke.toml"
+    code, _, err = cli(["rollout", "--out", tmp_path / "o", "--recipe", recipe,
+                        "--episodes", "3"], capsys)
+    assert_one_line_error(code, err, "--episodes conflicts with --recipe")
+    code, _, err = cli(["rollout", "--out", tmp_path / "o", "--recipe", tmp_path / "no.toml"],
+                       capsys)
+    assert_one_line_error(code, err, "cannot read recipe")
+    assert not (tmp_path / "o").exists()
+
+
+def test_info_reports_the_dataset(good: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = cli(["info", good], capsys)
+    assert code == 0
+    assert "episodes  3   stacks 90   frames 93   shards 2" in out
+    assert "B/frame" in out and "screen/unit_type" in out and "uint16" in out
+    assert "shard-00001.h5" in out
+    for layer in Schema.paper().layers:
+        assert layer.key in out
+
+
+def test_verify_passes_a_good_dataset(good: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = cli(["verify", good], capsys)
+    assert (code, err) == (0, "") and out.strip().endswith("OK")
+
+
+def test_verify_catches_a_flipped_byte(copy: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    flip_byte_in_chunk(copy / "shard-00001.h5", "screen/player_relative")
+    code, _, err = cli(["verify", copy], capsys)
+    assert code == 1
+    assert "shard-00001.h5:frames/screen/player_relative: unreadable chunk" in err
+    assert "shard-00001.h5: sha256" in err
+    assert "shard-00000" not in err
+
+
+def test_older_schema_version(copy: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A shard written under another schema version: verify, info and a resume all refuse it."""
+    with h5py.File(copy / "shard-00000.h5", "r+") as f:
+        f.attrs["schema"] = json.dumps({**Schema.paper().to_dict(), "version": 0})
+    code, _, err = cli(["verify", copy], capsys)
+    assert code == 1 and "schema version 0 is not the supported version" in err
+    code, _, err = cli(["info", copy], capsys)
+    assert_one_line_error(code, err, "schema version 0")
+    code, _, err = cli(["rollout", "--out", copy, "--env", "sim", "--agent", "random",
+                        "--episodes", "3", "--seed", "7", "--episodes-per-shard", "2"], capsys)
+    assert code == 2 and "Traceback" not in err
+
+
+def test_truncated_and_non_hdf5_shards(copy: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    data = (copy / "shard-00000.h5").read_bytes()
+    (copy / "shard-00000.h5").write_bytes(data[:len(data) // 3])
+    (copy / "shard-00001.h5").write_text("not a shard\n")
+    code, _, err = cli(["verify", copy], capsys)
+    assert code == 1
+    assert "shard-00000.h5 is not a readable HDF5 file" in err
+    assert "shard-00001.h5 is not a readable HDF5 file" in err
+    assert "2 fault(s)" in err.splitlines()[-1] or "fault(s)" in err
+
+
+def test_verify_index_faults(copy: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (copy / "shard-00001.h5").unlink()
+    (copy / "shard-00009.h5.partial").write_bytes(b"")
+    code, _, err = cli(["verify", copy], capsys)
+    assert code == 1
+    assert "shard-00001.h5: listed in index.parquet but missing" in err
+    assert "shard-00009.h5.partial: a partial file" in err
+    (copy / INDEX).unlink()
+    code, _, err = cli(["verify", copy], capsys)
+    assert_one_line_error(code, err, "unfinished rollout")
+
+
+def test_verify_and_info_on_non_datasets(tmp_path: Path,
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    for command in ("verify", "info"):
+        code, _, err = cli([command, tmp_path], capsys)
+        assert_one_line_error(code, err, "is not an sc2data dataset")
+        code, _, err = cli([command, tmp_path / "absent"], capsys)
+        assert_one_line_error(code, err, "is not a folder")

@@ -1,0 +1,274 @@
+"""Shard format, chunk codec and dataset reading, on synthetic BuildMarines-like frames."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import h5py
+import hdf5plugin
+import numpy as np
+import pytest
+
+import sc2data
+from sc2data._pysc2 import actions
+from sc2data.chunks import ChecksumError, Codec, fletcher32
+from sc2data.dataset import Dataset
+from sc2data.errors import Sc2DataError
+from sc2data.rollout import episode_seeds
+from sc2data.schema import Schema, StackBatch
+from sc2data.storage import ARG_WIDTH, FrameSource, Shard, ShardWriter, flatten_args, function_call
+from sc2data.synthetic import synthetic_episode
+from tests.synthetic_data import STEPS, make_dataset
+
+SCHEMA = Schema.paper()
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """5 episodes of 30 steps in 3 shards (2, 2, 1 episodes), 4-frame chunks."""
+    out = tmp_path_factory.mktemp("ds") / "data"
+    make_dataset(out)
+    return out
+
+
+def truth(episode: int, seed: int = 7) -> dict[str, np.ndarray]:
+    """The frames an episode must hold: the synthetic scene the env was seeded with."""
+    return synthetic_episode(SCHEMA, STEPS, episode_seeds(seed, episode)[0])
+
+
+def write_shard(path: Path, lengths: tuple[int, ...] = (5, 9), chunk_frames: int = 4) -> list:
+    """A shard of synthetic episodes; returns their frames and steps."""
+    writer = ShardWriter(path, SCHEMA, Codec(1, chunk_frames), {"seed": 1})
+    episodes = []
+    for e, n in enumerate(lengths):
+        frames = synthetic_episode(SCHEMA, n, seed=e)
+        calls = [actions.FUNCTIONS.select_rect("add", [e, t % 64], [3, 4]) if t % 2 else
+                 actions.FUNCTIONS.no_op() for t in range(n)]
+        writer.begin_episode(e, 10 + e, 20 + e)
+        writer.add_frame({k: v[0] for k, v in frames.items()})
+        for t, call in enumerate(calls):
+            writer.add_frame({k: v[t + 1] for k, v in frames.items()})
+            writer.add_step(int(call.function), call.arguments, float(t % 3 == 0))
+        writer.end_episode()
+        episodes.append((frames, calls))
+    writer.close()
+    return episodes
+
+
+# -- chunk codec --------------------------------------------------------------------------------
+@pytest.mark.parametrize("n", [7, 8, 4096, 40001])
+def test_fletcher32_matches_hdf5(tmp_path: Path, n: int) -> None:
+    """Our vectorised fletcher32 equals the checksum HDF5 itself stored, odd lengths included."""
+    data = np.random.default_rng(n).integers(0, 256, 3 * n, dtype=np.uint8)
+    with h5py.File(tmp_path / "f.h5", "w") as f:
+        f.create_dataset("x", data=data, chunks=(n,), fletcher32=True)
+        f.create_dataset("z", data=data, chunks=(n,), fletcher32=True, **hdf5plugin.Zstd())
+    with h5py.File(tmp_path / "f.h5", "r") as f:
+        raws = [f[k].id.read_direct_chunk((i * n,))[1] for k in "xz" for i in range(3)]
+    stored = [int.from_bytes(r[-4:], "little") for r in raws]
+    assert fletcher32([r[:-4] for r in raws]).tolist() == stored
+
+
+def test_fletcher32_sees_a_flipped_bit() -> None:
+    payload = bytes(range(256)) * 5
+    flipped = bytearray(payload)
+    flipped[100] ^= 0x04
+    a, b = fletcher32([payload, bytes(flipped)])
+    assert a != b
+
+
+# -- shard files --------------------------------------------------------------------------------
+def test_shard_roundtrip(tmp_path: Path) -> None:
+    """Frames (through HDF5's own filters), steps, actions and the episode table read back."""
+    path = tmp_path / "s.h5"
+    episodes = write_shard(path)
+    shard = Shard(path)
+    try:
+        assert shard.schema == SCHEMA and shard.attrs["seed"] == 1
+        assert shard.episodes["n_steps"].tolist() == [5, 9]
+        assert shard.episodes["frame_start"].tolist() == [0, 6]
+        assert shard.episodes["agent_seed"].tolist() == [20, 21]
+        steps = shard.steps()
+        for (frames, calls), f0, s0 in zip(episodes, (0, 6), (0, 5)):
+            for k, v in frames.items():
+                np.testing.assert_array_equal(shard.file[f"frames/{k}"][f0:f0 + len(v)], v)
+            for t, call in enumerate(calls):
+                got = function_call(steps["function"][s0 + t], steps["args"][s0 + t])
+                assert got == call
+        assert steps["args"].shape == (14, ARG_WIDTH)
+        assert steps["reward"][:5].tolist() == [1, 0, 0, 1, 0]
+    finally:
+        shard.close()
+
+
+def test_fast_path_equals_hdf5_path(tmp_path: Path) -> None:
+    path = tmp_path / "s.h5"
+    write_shard(path, lengths=(6, 6))
+    shard = Shard(path)
+    try:
+        for key in ("screen/unit_type", "minimap/camera", "player"):
+            fast = shard.frames(key)
+            slow = FrameSource(shard.file[f"frames/{key}"], None, key)
+            ids = np.arange(-(-14 // 4))
+            assert fast._mm is not None and slow._mm is None
+            assert fast.read_chunks(ids) == slow.read_chunks(ids)
+    finally:
+        shard.close()
+
+
+def test_shard_bytes_depend_only_on_content(tmp_path: Path) -> None:
+    write_shard(tmp_path / "a.h5")
+    write_shard(tmp_path / "b.h5")
+    assert (tmp_path / "a.h5").read_bytes() == (tmp_path / "b.h5").read_bytes()
+
+
+def flip_byte_in_chunk(path: Path, key: str, chunk: int = 1) -> None:
+    """Damage one byte in the middle of a stored frame chunk."""
+    with h5py.File(path, "r") as f:
+        info = f[f"frames/{key}"].id.get_chunk_info_by_coord((chunk * 4, 0, 0))
+    with open(path, "r+b") as f:
+        f.seek(info.byte_offset + info.size // 2)
+        b = f.read(1)
+        f.seek(-1, 1)
+        f.write(bytes([b[0] ^ 0x10]))
+
+
+def test_flipped_byte_is_caught_by_both_paths(tmp_path: Path) -> None:
+    path = tmp_path / "s.h5"
+    write_shard(path)
+    flip_byte_in_chunk(path, "screen/unit_type")
+    shard = Shard(path)
+    try:
+        with pytest.raises(ChecksumError, match="checksum"):
+            shard.frames("screen/unit_type").read_chunks(np.array([1]))
+        with pytest.raises(OSError):
+            shard.file["frames/screen/unit_type"][4:8]
+        shard.frames("screen/unit_type").read_chunks(np.array([0, 2]))  # the others are fine
+    finally:
+        shard.close()
+
+
+def test_shard_of_another_schema_version_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / "s.h5"
+    write_shard(path)
+    with h5py.File(path, "r+") as f:
+        f.attrs["schema"] = json.dumps({**SCHEMA.to_dict(), "version": 0})
+    with pytest.raises(Sc2DataError, match="schema version 0"):
+        Shard(path)
+
+
+def test_truncated_and_foreign_files_are_refused(tmp_path: Path) -> None:
+    path = tmp_path / "s.h5"
+    write_shard(path)
+    data = path.read_bytes()
+    path.write_bytes(data[:len(data) // 2])
+    with pytest.raises(Sc2DataError, match="truncated or not an sc2data shard"):
+        Shard(path)
+    path.write_bytes(b"this is not HDF5\n" * 100)
+    with pytest.raises(Sc2DataError, match="not a readable HDF5 file"):
+        Shard(path)
+    with h5py.File(path, "w") as f:
+        f["x"] = np.zeros(3)
+    with pytest.raises(Sc2DataError, match="not an sc2data shard"):
+        Shard(path)
+
+
+def test_flatten_args_pads_and_rejects_too_many() -> None:
+    assert flatten_args(0, []).tolist() == [-1] * ARG_WIDTH
+    assert flatten_args(3, [[1], [2, 3], [4, 5]]).tolist() == [1, 2, 3, 4, 5]
+    with pytest.raises(ValueError):
+        flatten_args(3, [[1], [2, 3], [4, 5], [6]])
+
+
+# -- reading a dataset --------------------------------------------------------------------------
+def test_open_dataset_tables(dataset: Path) -> None:
+    ds = sc2data.open_dataset(dataset)
+    assert isinstance(ds, Dataset)
+    assert ds.episode_ids.tolist() == [0, 1, 2, 3, 4]
+    assert ds.n_steps.tolist() == [STEPS] * 5 and len(ds) == 5 * STEPS
+    assert ds.shard_names == ["shard-00000.h5", "shard-00001.h5", "shard-00002.h5"]
+    assert ds.settings["episodes"] == 5 and ds.schema == SCHEMA
+    assert "stacks=150" in repr(ds)
+
+
+def test_read_random_stacks_equals_the_frames_played(dataset: Path) -> None:
+    """Random (episode, step) pairs across shards and chunk edges give the env's frames."""
+    ds = sc2data.open_dataset(dataset)
+    rng = np.random.default_rng(0)
+    episodes = rng.integers(0, 5, 200)
+    steps = rng.integers(0, STEPS, 200)
+    steps[:5] = [0, STEPS - 1, 3, 4, 7]  # episode edges and chunk edges
+    batch = ds.read(episodes, steps)
+    assert isinstance(batch, StackBatch) and len(batch) == 200
+    frames = {e: truth(e) for e in range(5)}
+    for i, (e, t) in enumerate(zip(episodes, steps)):
+        for k in SCHEMA.keys():
+            np.testing.assert_array_equal(batch.arrays[k][i, 0], frames[e][k][t])
+            np.testing.assert_array_equal(batch.arrays[k][i, 1], frames[e][k][t + 1])
+
+
+def test_stack_and_key_subsets(dataset: Path) -> None:
+    ds = sc2data.open_dataset(dataset)
+    one = ds.stack(3, 11)
+    assert len(one) == 1 and one.layer("screen/unit_type").shape == (1, 2, 64, 64)
+    assert one.layer("screen/unit_hit_points").dtype == np.uint16
+    sub = ds.read([3], [11], keys=["player", "minimap/camera"])
+    assert set(sub.arrays) == {"player", "minimap/camera"}
+    np.testing.assert_array_equal(sub.arrays["player"], one.arrays["player"])
+    assert sub.vector("player", "minerals").shape == (1, 2)
+    with pytest.raises(KeyError, match="not stored"):
+        ds.read([0], [0], keys=["screen/effects"])
+
+
+def test_iter_batches_visits_every_stack_in_order(dataset: Path) -> None:
+    ds = sc2data.open_dataset(dataset, cache_bytes=0)
+    seen_e, seen_t, firsts = [], [], []
+    for episodes, steps, batch in ds.iter_batches(batch_size=64, keys=["game_loop"]):
+        assert len(batch) == len(episodes) <= 64
+        seen_e += episodes.tolist()
+        seen_t += steps.tolist()
+        firsts.append(batch.arrays["game_loop"])
+    assert seen_e == [e for e in range(5) for _ in range(STEPS)]
+    assert seen_t == list(range(STEPS)) * 5
+    loops = np.concatenate(firsts)[:, :, 0]
+    assert (loops[:, 1] - loops[:, 0] == 8).all()  # (previous, current) of one episode
+
+
+def test_cache_does_not_change_results(dataset: Path) -> None:
+    cached, uncached = sc2data.open_dataset(dataset), sc2data.open_dataset(dataset, cache_bytes=0)
+    e, t = np.array([1, 1, 4, 0, 1]), np.array([5, 6, 29, 0, 5])
+    for _ in range(2):
+        a, b = cached.read(e, t), uncached.read(e, t)
+        for k in SCHEMA.keys():
+            np.testing.assert_array_equal(a.arrays[k], b.arrays[k])
+
+
+def test_bad_requests(dataset: Path) -> None:
+    ds = sc2data.open_dataset(dataset)
+    with pytest.raises(KeyError, match="episode 9"):
+        ds.stack(9, 0)
+    with pytest.raises(IndexError, match="outside episode 2"):
+        ds.stack(2, STEPS)
+    with pytest.raises(IndexError):
+        ds.stack(2, -1)
+    with pytest.raises(ValueError):
+        ds.read([0, 1], [0])
+    with pytest.raises(ValueError):
+        next(ds.iter_batches(0))
+
+
+def test_actions_are_the_agents_calls(dataset: Path) -> None:
+    ds = sc2data.open_dataset(dataset)
+    acts = ds.actions([0, 4, 4], [0, 0, STEPS - 1])
+    assert acts["function"].shape == (3,) and acts["args"].shape == (3, ARG_WIDTH)
+    for f, a in zip(acts["function"], acts["args"]):
+        call = function_call(f, a)
+        assert len(call.arguments) == len(actions.FUNCTIONS[int(f)].args)
+
+
+def test_open_dataset_refuses_non_datasets(tmp_path: Path) -> None:
+    with pytest.raises(Sc2DataError, match="not an sc2data dataset"):
+        sc2data.open_dataset(tmp_path)
+    with pytest.raises(Sc2DataError, match="not a folder"):
+        sc2data.open_dataset(tmp_path / "nope")

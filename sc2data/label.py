@@ -20,12 +20,14 @@ temporary name and renamed into place, so a failure never leaves a half-written 
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import hashlib
 import json
 import os
 import re
 import shutil
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -42,6 +44,7 @@ from sc2data.schema import Schema, StackBatch
 LABELS_FILE = "labels.parquet"
 STACKS_FILE = "stack_labels.parquet"
 PARTS_DIR = ".labels-parts"
+LOCK_FILE = ".labels.lock"
 META_KEY = b"sc2data.labels"
 FORMAT_VERSION = 1
 
@@ -92,10 +95,14 @@ class LabelSummary:
     def table(self) -> str:
         """Counts and fire rates per command, then the null and overlap rates."""
         rows = [(self.commands[i], i, n) for i, n in self.counts.items()]
-        rows += [("(null: no rule fired)", "", self.null), ("(two or more rules fired)", "", self.multi)]
+        rows += [("(null: no rule fired)", "", self.null),
+                 ("(two or more rules fired)", "", self.multi)]
         w0 = max(len(r[0]) for r in rows + [("command", "", 0)])
         w1 = max(len(r[1]) for r in rows + [("", "rule id", 0)])
-        rate = (lambda n: f"{100 * n / self.stacks:7.3f}%") if self.stacks else (lambda n: "      -")
+
+        def rate(n: int) -> str:
+            return f"{100 * n / self.stacks:7.3f}%" if self.stacks else "      -"
+
         lines = [f"{'command':<{w0}}  {'rule id':<{w1}}  {'stacks':>10}  {'rate':>8}"]
         lines += [f"{c:<{w0}}  {i:<{w1}}  {n:>10,}  {rate(n)}" for c, i, n in rows]
         lines.append(f"{self.stacks:,} stacks labelled → {self.path}")
@@ -124,7 +131,7 @@ def required_keys(rules: Sequence[Registered], schema: Schema) -> tuple[str, ...
 
 def label_batches(batches: Batches, rules: Sequence[Registered],
                   on_batch: Callable[[int], None] | None = None) -> pa.Table:
-    """Run the rules over ``batches``: a table of ``episode``, ``step`` and one bool column per rule.
+    """Run the rules over ``batches``: a table of ``episode``, ``step``, one bool column per rule.
 
     Every answer is checked (shape, dtype) and any exception becomes a one-line error naming the
     rule and the stacks it failed on.
@@ -203,23 +210,50 @@ def _with_meta(table: pa.Table, meta: dict[str, Any]) -> pa.Table:
 
 def label(source: Source, rules: Sequence[Registered], out_dir: Path | str, *,
           batch_size: int = DEFAULT_BATCH, progress: bool = True) -> LabelSummary:
-    """Label every unit of ``source`` with ``rules`` into ``out_dir``; resumes finished units."""
-    from tqdm import tqdm
+    """Label every unit of ``source`` with ``rules`` into ``out_dir``; resumes finished units.
 
-    from sc2data.provenance import versions
-
+    One run at a time per folder (a lock file); an unwritable folder is a one-line error.
+    """
     out = Path(out_dir)
     if batch_size < 1:
         raise Sc2DataError(f"--batch-size must be at least 1, not {batch_size}")
     if not rules:
         raise Sc2DataError("no rules to label with")
     check_requirements(rules, source.schema, f"the dataset at {out}")
-    keys = required_keys(rules, source.schema)
     fp = fingerprint(rules, source.info)
     done = _existing(out, fp)
     if done is not None:
         return done
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with _lock(out):
+            return _run(source, rules, out, fp, batch_size, progress)
+    except OSError as e:
+        raise Sc2DataError(f"cannot write labels in {out}: {e.strerror or e}; check the folder "
+                           f"is writable and has space") from e
 
+
+@contextlib.contextmanager
+def _lock(out: Path) -> Iterator[None]:
+    with open(out / LOCK_FILE, "a+b") as f:
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise Sc2DataError(f"another sc2data label is running on {out}; wait for it to "
+                               f"finish") from None
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
+def _run(source: Source, rules: Sequence[Registered], out: Path, fp: str, batch_size: int,
+         progress: bool) -> LabelSummary:
+    from tqdm import tqdm
+
+    from sc2data.provenance import versions
+
+    keys = required_keys(rules, source.schema)
     parts = out / PARTS_DIR
     state = parts / "state.json"
     if parts.is_dir() and (not state.is_file() or json.loads(state.read_text()).get(
@@ -260,6 +294,7 @@ def label(source: Source, rules: Sequence[Registered], out_dir: Path | str, *,
         "multi": multi,
         "versions": versions(),
     }
+    # The per-stack table first, the long one last: read_labels checks they belong together.
     _write_atomic(_with_meta(wide, meta), out / STACKS_FILE)
     _write_atomic(_with_meta(long_form(wide, rules), meta), out / LABELS_FILE)
     shutil.rmtree(parts, ignore_errors=True)
@@ -301,7 +336,7 @@ def _existing(out: Path, fp: str) -> LabelSummary | None:
     return _summary(out, meta, up_to_date=True)
 
 
-# -- reading ----------------------------------------------------------------------------------------
+# -- reading ---------------------------------------------------------------------------------------
 
 def read_meta(folder: Path | str) -> dict[str, Any]:
     """The provenance record of the labels in ``folder``."""
@@ -341,7 +376,7 @@ def read_labels(folder: Path | str) -> Labels:
     return Labels(pq.read_table(Path(folder) / LABELS_FILE), stacks, meta)
 
 
-# -- the dataset door --------------------------------------------------------------------------------
+# -- the dataset door ------------------------------------------------------------------------------
 
 def dataset_source(path: Path | str) -> Source:
     """A :class:`Source` over the rolled-out dataset at ``path``: one unit per shard, keyed by the

@@ -1,10 +1,10 @@
-"""The Rule API: a labelling rule decides, for each two-frame stack, whether a command was satisfied.
+"""The Rule API: a labelling rule says, for each two-frame stack, whether a command was satisfied.
 
 A rule is a small pure object. It declares
 
-* ``id`` — a stable snake_case identifier (``build_supply_depot``), the key labels are stored under;
+* ``id`` — a stable snake_case identifier (``build_supply_depot``), the key of its labels;
 * ``command`` — the canonical natural-language text (``"build a supply depot"``);
-* ``version`` — an integer, bumped whenever the rule's meaning changes, so old labels are told apart;
+* ``version`` — an integer, bumped whenever the rule's meaning changes (old labels stay apart);
 * ``requires`` — the schema keys it reads (``"screen/unit_type"``, ``"player"``, …), so the
   labeller reads only those from storage and refuses a dataset that lacks one;
 
@@ -122,7 +122,8 @@ def is_any(plane: np.ndarray, values: Sequence[int]) -> np.ndarray:
 
 
 def pixel_count(plane: np.ndarray, values: Sequence[int]) -> np.ndarray:
-    """``(B, 2, H, W)`` categorical layer → ``(B, 2)`` pixels per frame whose value is in ``values``."""
+    """``(B, 2, H, W)`` categorical layer → ``(B, 2)``: pixels per frame with a value in
+    ``values``."""
     b = plane.shape[0]
     mask = is_any(plane.reshape(b * 2, *plane.shape[2:]), values)
     return count_true(mask).reshape(b, 2)

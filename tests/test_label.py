@@ -14,8 +14,8 @@ import pytest
 
 from sc2data._pysc2 import units
 from sc2data.errors import Sc2DataError
-from sc2data.label import (LABELS_FILE, PARTS_DIR, STACKS_FILE, Source, Unit, label, read_labels,
-                           read_meta)
+from sc2data.label import (LABELS_FILE, LOCK_FILE, PARTS_DIR, STACKS_FILE, Source, Unit, label,
+                           read_labels, read_meta)
 from sc2data.registry import Registered, RuleError, load_registry, load_rules_dir
 from sc2data.rulebase import SCREEN_PX_PER_UNIT, blank_frame, paint_disk, set_field, stack
 from sc2data.schema import Schema, StackBatch
@@ -211,6 +211,20 @@ def test_failure_keeps_an_older_complete_labels_file(tmp_path: Path) -> None:
     assert read_labels(tmp_path).meta["counts"]["build_scv"] == 6
 
 
+def test_unwritable_folder_and_concurrent_runs(tmp_path: Path) -> None:
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    with pytest.raises(Sc2DataError, match=r"^cannot write labels in .*a-file/data: "):
+        label(source(), RULES, blocker / "data", progress=False)
+    import fcntl
+
+    with open(tmp_path / LOCK_FILE, "a+b") as held:
+        fcntl.flock(held, fcntl.LOCK_EX)
+        with pytest.raises(Sc2DataError, match="another sc2data label is running on"):
+            label(source(), RULES, tmp_path, progress=False)
+    assert nothing_written(tmp_path)
+
+
 def test_mismatched_files_are_refused(tmp_path: Path) -> None:
     label(source(), RULES, tmp_path / "a", progress=False)
     label(source(), RULES[:2], tmp_path / "b", progress=False)
@@ -286,6 +300,14 @@ def test_cli_label_selects_rules(data: Path, capsys: pytest.CaptureFixture[str])
         one_line_error(capsys)
 
 
+def test_cli_label_refuses_a_folder_that_is_not_a_dataset(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("sc2data.rollout", reason="dataset storage is not in this build")
+    assert run_cli("label", str(tmp_path), "--no-progress") == 2
+    assert "is not an sc2data dataset" in one_line_error(capsys)
+    assert list(tmp_path.iterdir()) == []
+
+
 BAD_RULE = """
 import numpy as np
 from sc2data.rulebase import rule
@@ -301,7 +323,8 @@ def f(batch):
      r"rule 'sees_progress' \(file .*bad\.py\) needs 'screen/build_progress', which the dataset "
      r"at .* does not store"),
     ("late_raiser", '["player"]',
-     "if len(batch) > 5:\n        raise RuntimeError('oops')\n    return np.zeros(len(batch), bool)",
+     "if len(batch) > 5:\n        raise RuntimeError('oops')\n"
+     "    return np.zeros(len(batch), bool)",
      r"rule 'late_raiser' from file .*bad\.py raised RuntimeError: oops on the stacks from "
      r"episode 0 step 0"),
     ("late_shape", '["player"]',

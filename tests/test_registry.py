@@ -55,7 +55,7 @@ def run_cli(*args: str) -> int:
     return 0
 
 
-# -- discovery ----------------------------------------------------------------------------------
+# -- discovery -------------------------------------------------------------------------------------
 
 def test_builtins_come_through_the_entry_point() -> None:
     registry = load_registry()
@@ -124,8 +124,10 @@ BAD = {
     "dtype": ("""
         @rule(id="counts", command="count", requires=["player"])
         def f(batch):
-            return batch.vector("player", "minerals")[:, 1] - batch.vector("player", "minerals")[:, 0]
-        """, r"rule 'counts' .* returned int32 array of shape \(5,\) for 5 stacks \(a synthetic batch\)"),
+            minerals = batch.vector("player", "minerals")
+            return minerals[:, 1] - minerals[:, 0]
+        """, r"rule 'counts' .* returned int32 array of shape \(5,\) for 5 stacks "
+             r"\(a synthetic batch\)"),
     "a_list": ("""
         @rule(id="listy", command="list", requires=["player"])
         def f(batch):
@@ -200,7 +202,8 @@ def test_entry_point_module_without_rules(tmp_path: Path, monkeypatch: pytest.Mo
         load_registry()
 
 
-def test_entry_point_naming_one_rule_object(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_entry_point_naming_one_rule_object(tmp_path: Path,
+                                            monkeypatch: pytest.MonkeyPatch) -> None:
     fake_plugin(tmp_path, "oneplug", HEADER + GOOD.format(id="more_minerals"),
                 "oneplug:MoreMinerals")
     monkeypatch.syspath_prepend(str(tmp_path))
@@ -235,12 +238,13 @@ def test_cli_rules_dir_missing(capsys: pytest.CaptureFixture[str], tmp_path: Pat
     assert "is not a folder" in capsys.readouterr().err
 
 
-# -- the example plugin package, installed with pip and found through its entry point ---------------
+# -- the example plugin package, installed with pip and found through its entry point --------------
 
 @pytest.fixture(scope="module")
 def installed_example(tmp_path_factory: pytest.TempPathFactory) -> Path:
     work = tmp_path_factory.mktemp("example")
-    src = shutil.copytree(EXAMPLE, work / "src", ignore=shutil.ignore_patterns("build", "*.egg-info"))
+    src = shutil.copytree(EXAMPLE, work / "src",
+                          ignore=shutil.ignore_patterns("build", "*.egg-info"))
     site = work / "site"
     proc = subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps",
                            "--no-build-isolation", "--no-index", "--target", str(site), str(src)],
@@ -251,7 +255,8 @@ def installed_example(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def test_example_plugin_is_discovered_through_its_entry_point(
         installed_example: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    assert (installed_example / "sc2data_rule_example-0.1.0.dist-info" / "entry_points.txt").is_file()
+    info = installed_example / "sc2data_rule_example-0.1.0.dist-info"
+    assert (info / "entry_points.txt").is_file()
     monkeypatch.syspath_prepend(str(installed_example))
     entry = load_registry().get("finish_supply_depot")
     assert entry.source == ("sc2data-rule-example 0.1.0 (entry point example: "

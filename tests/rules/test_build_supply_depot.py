@@ -1,4 +1,4 @@
-"""build_supply_depot on hand-built frames: new depots fire; units walking, dying, lowering don't."""
+"""build_supply_depot on hand-built frames: new depots fire; walking, dying, lowering don't."""
 
 from __future__ import annotations
 

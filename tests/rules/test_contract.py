@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-from sc2data.registry import load_registry
+from sc2data.registry import Registered, load_registry
 from sc2data.rulebase import RULE_ID, blank_frame, is_schema_key, stack, synthetic_batch
 from sc2data.schema import Schema, StackBatch
 
@@ -21,11 +21,11 @@ def test_the_five_builtin_rules_are_registered() -> None:
 
 
 @pytest.fixture(params=list(REGISTRY), ids=lambda e: e.id)
-def entry(request: pytest.FixtureRequest):  # type: ignore[no-untyped-def]
+def entry(request: pytest.FixtureRequest) -> Registered:
     return request.param
 
 
-def test_declaration(entry) -> None:  # type: ignore[no-untyped-def]
+def test_declaration(entry: Registered) -> None:
     r = entry.rule
     assert RULE_ID.match(r.id)
     assert isinstance(r.command, str) and r.command.strip() == r.command and r.command
@@ -35,12 +35,12 @@ def test_declaration(entry) -> None:  # type: ignore[no-untyped-def]
 
 
 @pytest.mark.parametrize("size", [1, 7, 64])
-def test_answers_a_bool_per_stack(entry, size: int) -> None:  # type: ignore[no-untyped-def]
+def test_answers_a_bool_per_stack(entry: Registered, size: int) -> None:
     out = entry.rule(synthetic_batch(entry.rule.requires, size, seed=size))
     assert isinstance(out, np.ndarray) and out.dtype == np.bool_ and out.shape == (size,)
 
 
-def test_rows_are_independent_and_deterministic(entry) -> None:  # type: ignore[no-untyped-def]
+def test_rows_are_independent_and_deterministic(entry: Registered) -> None:
     batch = synthetic_batch(entry.rule.requires, 12, seed=3)
     whole = entry.rule(batch)
     halves = [entry.rule(StackBatch({k: a[s] for k, a in batch.arrays.items()}, batch.schema))
@@ -49,20 +49,20 @@ def test_rows_are_independent_and_deterministic(entry) -> None:  # type: ignore[
     assert np.array_equal(whole, entry.rule(batch))
 
 
-def test_pure_does_not_modify_its_input(entry) -> None:  # type: ignore[no-untyped-def]
+def test_pure_does_not_modify_its_input(entry: Registered) -> None:
     batch = synthetic_batch(entry.rule.requires, 6, seed=1)
     before = {k: a.copy() for k, a in batch.arrays.items()}
     entry.rule(batch)
     assert all(np.array_equal(before[k], batch.arrays[k]) for k in before)
 
 
-def test_reads_the_full_schema_and_ignores_extra_keys(entry) -> None:  # type: ignore[no-untyped-def]
+def test_reads_the_full_schema_and_ignores_extra_keys(entry: Registered) -> None:
     schema = Schema.full()
     out = entry.rule(stack([(blank_frame(schema), blank_frame(schema))] * 3, schema))
     assert out.shape == (3,)
 
 
-def test_builtin_rules_fire_on_nothing_when_nothing_changes(entry) -> None:  # type: ignore[no-untyped-def]
+def test_builtin_rules_fire_on_nothing_when_nothing_changes(entry: Registered) -> None:
     if not entry.source.startswith("sc2data "):
         pytest.skip("a property of the built-in commands, not of every rule")
     batch = synthetic_batch(entry.rule.requires, 9, seed=5)

@@ -143,25 +143,19 @@ def direct_round(folder: Path, write: Callable[[], None], n_frames: int) -> dict
         ds.read(*ds.locate(0, 1), keys=keys)  # open the shard, load chunk tables
         t = time.perf_counter()
         for p in pos:
-            e, s = _at(ds, p)
-            ds.read(e, s, keys=keys)
+            ds.read(*ds.locate_positions(p), keys=keys)
         r[name] = pos.size / (time.perf_counter() - t)
     # The pair packer's pattern: a sorted 12 % sample of all stacks, read in batches of 1024.
     sample = np.sort(rng.choice(n, n // 8, replace=False))
     t = time.perf_counter()
     for i in range(0, len(sample), 1024):
-        ds.read(*_at(ds, sample[i:i + 1024]))
+        ds.read(*ds.locate_positions(sample[i:i + 1024]))
     r["sample_sps"] = len(sample) / (time.perf_counter() - t)
     t = time.perf_counter()
     m = sum(len(b) for _, _, b in ds.iter_batches(1024))
     r["seq_sps"] = m / (time.perf_counter() - t)
     ds.close()
     return r
-
-
-def _at(ds: Any, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    rows = np.searchsorted(ds._stack_offsets, pos, side="right") - 1
-    return ds.episode_ids[rows], pos - ds._stack_offsets[rows]
 
 
 def main() -> None:

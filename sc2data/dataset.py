@@ -49,11 +49,15 @@ def shard_name(i: int) -> str:
 def write_atomic(path: Path, data: bytes) -> None:
     """Write ``path`` so that it is either absent, old, or complete: temp file, fsync, rename."""
     tmp = path.with_name(path.name + PARTIAL)
-    with open(tmp, "wb") as f:
-        f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
     fsync_path(path.parent)
 
 
@@ -301,7 +305,15 @@ class Dataset:
 
     def locate(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
         """(episodes, steps) of the stacks at global positions ``[start, stop)``, in order."""
-        pos = np.arange(start, stop, dtype=np.int64)
+        return self.locate_positions(np.arange(start, stop, dtype=np.int64))
+
+    def locate_positions(self, positions: Sequence[int] | np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray]:
+        """(episodes, steps) of stacks by global position ``0 <= p < len(self)`` (the order of
+        :meth:`iter_batches`): e.g. ``read(*locate_positions(rng.integers(0, len(ds), 256)))``."""
+        pos = np.asarray(positions, np.int64).reshape(-1)
+        if len(pos) and (pos.min() < 0 or pos.max() >= len(self)):
+            raise IndexError(f"stack positions must lie in [0, {len(self)})")
         rows = np.searchsorted(self._stack_offsets, pos, side="right") - 1
         return self.episode_ids[rows], pos - self._stack_offsets[rows]
 

@@ -20,6 +20,7 @@ import queue
 import random
 import shutil
 import signal
+import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field
@@ -234,7 +235,8 @@ def check_folder(config: RolloutConfig, out: Path) -> None:
         if diff:
             raise Sc2DataError(f"{out} holds a dataset made with other settings (differs in: "
                                f"{', '.join(diff)}); use another --out or delete it")
-    elif out.is_dir() and any(p.name != LOCK for p in out.iterdir()):
+    elif out.is_dir() and any(p.name != LOCK and not p.name.endswith(PARTIAL)
+                              for p in out.iterdir()):  # our own debris is not foreign
         raise Sc2DataError(f"output folder {out} is not empty and is not an sc2data dataset; "
                            f"choose an empty or new folder")
 
@@ -376,8 +378,16 @@ def _run_parallel(config: RolloutConfig, out: Path, todo: list[int], workers: in
     procs = [ctx.Process(target=_worker, args=(tasks, results, config, out, env_factory,
                                                agent_factory, os.getpid()), daemon=True)
              for _ in range(n)]
-    for p in procs:
-        p.start()
+    # Workers inherit an ignored SIGINT, so that a Ctrl-C while they import cannot hit them:
+    # the parent alone handles it, and stops them.
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main_thread else None
+    try:
+        for p in procs:
+            p.start()
+    finally:
+        if main_thread:
+            signal.signal(signal.SIGINT, previous)
     pending = set(todo)
     try:
         while pending:

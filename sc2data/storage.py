@@ -144,7 +144,10 @@ class ShardWriter:
         slot = self._n_frames % self.codec.chunk_frames
         for obs_key, index, scale, buffers, layers in self._groups:
             planes = np.asarray(obs[obs_key])[index]
-            bad = (planes.max(axis=(1, 2)) >= scale) | (planes.min(axis=(1, 2)) < 0)
+            if planes.dtype == np.int32:  # one pass: negatives read as unsigned exceed any scale
+                bad = planes.view(np.uint32).max(axis=(1, 2)) >= scale
+            else:
+                bad = (planes.max(axis=(1, 2)) >= scale) | (planes.min(axis=(1, 2)) < 0)
             if bad.any():
                 l = layers[int(np.flatnonzero(bad)[0])]
                 raise ValueError(f"{l.key} holds values outside [0, {l.scale})")

@@ -203,6 +203,10 @@ def test_add_observation_equals_add_frame_of_extract(tmp_path: Path) -> None:
         w.add_observation(obs)
     with pytest.raises(ValueError, match="screen/unit_type holds values outside"):
         SCHEMA.extract(obs)
+    obs = render(scene, 0)
+    obs["feature_minimap"][SCHEMA.minimap[3].index, 5, 5] = -1  # camera: negative
+    with pytest.raises(ValueError, match="minimap/camera holds values outside"):
+        w.add_observation(obs)
     w.abort()
 
 
@@ -265,6 +269,15 @@ def test_iter_batches_visits_every_stack_in_order(dataset: Path) -> None:
     assert seen_t == list(range(STEPS)) * 5
     loops = np.concatenate(firsts)[:, :, 0]
     assert (loops[:, 1] - loops[:, 0] == 8).all()  # (previous, current) of one episode
+
+
+def test_locate_positions_follows_iteration_order(dataset: Path) -> None:
+    ds = sc2data.open_dataset(dataset)
+    e, t = ds.locate_positions([0, STEPS - 1, STEPS, 4 * STEPS + 2])
+    assert e.tolist() == [0, 0, 1, 4] and t.tolist() == [0, STEPS - 1, 0, 2]
+    assert [a.tolist() for a in ds.locate(STEPS - 1, STEPS + 1)] == [[0, 1], [STEPS - 1, 0]]
+    with pytest.raises(IndexError):
+        ds.locate_positions([len(ds)])
 
 
 def test_cache_does_not_change_results(dataset: Path) -> None:

@@ -199,7 +199,11 @@ def main(argv: list[str] | None = None) -> None:
     command = typer.main.get_command(app)
     try:
         rc = command.main(args=argv, prog_name="sc2data", standalone_mode=False)
-        if isinstance(rc, int) and rc:  # click returns typer.Exit(code) here, not raising it
+        # Non-standalone click returns typer.Exit(code) instead of raising it; typer turns a
+        # Ctrl-C inside a command into a returned 130.
+        if rc == 130:
+            typer.echo("sc2data: interrupted; rerun the same command to resume", err=True)
+        if isinstance(rc, int) and rc:
             sys.exit(rc)
     except typer.Exit as e:
         sys.exit(e.exit_code)

@@ -218,3 +218,7 @@ def main(argv: list[str] | None = None) -> None:
     except KeyboardInterrupt:
         typer.echo("sc2data: interrupted; rerun the same command to resume", err=True)
         sys.exit(130)
+
+
+if __name__ == "__main__":
+    main()

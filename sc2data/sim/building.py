@@ -10,6 +10,7 @@ completes. Supply from a depot or CC counts only once it is complete.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -205,26 +206,38 @@ class Building(GameCore):
     def _spawn_spot(self, b: Unit, t: float) -> tuple[float, float]:
         """A free spot next to ``b``: rings around its footprint, south side first."""
         r = md.UNIT_DATA[md.MARINE].radius
+        rings = _spawn_rings(max(b.data.footprint), r)
+        reach = max(b.data.footprint) / 2 + r * (2 * len(rings) + 1)
         ground = self.table.ground()
-        if len(ground):
-            gx, gy = self.table.positions(ground, t)
+        gx, gy = self.table.positions(ground, t)
+        near = (np.abs(gx - b.x1) < reach) & (np.abs(gy - b.y1) < reach)
+        gx, gy = gx[near], gy[near]
         x0, y0, x1, y1 = md.PLAYABLE
-        for ring in range(12):
-            half = max(b.data.footprint) / 2 + r + ring * 2 * r
-            n = max(4, int(8 * half / (2 * r)))
-            ang = -math.pi / 2 + 2 * math.pi * np.arange(n) / n
-            order = np.argsort(np.abs(((ang + math.pi / 2 + math.pi) % (2 * math.pi)) - math.pi),
-                               kind="stable")
-            ang = ang[order]
-            cx = b.x1 + half * np.clip(np.cos(ang) * 1.5, -1, 1)
-            cy = b.y1 + half * np.clip(np.sin(ang) * 1.5, -1, 1)
+        for dx, dy in rings:
+            cx, cy = b.x1 + dx, b.y1 + dy
             ok = (cx > x0 + r) & (cx < x1 - r) & (cy > y0 + r) & (cy < y1 - r)
-            cells = self.occupied[np.clip(cy.astype(int), 0, 63), np.clip(cx.astype(int), 0, 63)]
-            ok &= ~cells
-            if len(ground):
+            ok &= ~self.occupied[np.clip(cy.astype(int), 0, 63), np.clip(cx.astype(int), 0, 63)]
+            if len(gx):
                 d2 = (cx[:, None] - gx[None, :]) ** 2 + (cy[:, None] - gy[None, :]) ** 2
                 ok &= (d2 >= (2 * r * 0.95) ** 2).all(axis=1)
             hits = np.flatnonzero(ok)
             if len(hits):
                 return float(cx[hits[0]]), float(cy[hits[0]])
         return b.x1, b.y1 - max(b.data.footprint) / 2 - r
+
+
+@functools.cache
+def _spawn_rings(size: int, r: float, count: int = 12) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
+    """Offsets of spawn spots around a ``size``-cell footprint, ring by ring outwards, each
+    ring's spots ordered from the south side round."""
+    out = []
+    for ring in range(count):
+        half = size / 2 + r + ring * 2 * r
+        n = max(4, int(8 * half / (2 * r)))
+        ang = -math.pi / 2 + 2 * math.pi * np.arange(n) / n
+        order = np.argsort(np.abs(((ang + math.pi / 2 + math.pi) % (2 * math.pi)) - math.pi),
+                           kind="stable")
+        ang = ang[order]
+        out.append((half * np.clip(np.cos(ang) * 1.5, -1, 1),
+                    half * np.clip(np.sin(ang) * 1.5, -1, 1)))
+    return tuple(out)

@@ -20,6 +20,7 @@ only fight what they are ordered to and never acquire targets on their own.
 
 from __future__ import annotations
 
+import collections
 import heapq
 import math
 import random
@@ -90,7 +91,8 @@ class GameCore:
         self.idle_worker_time = 0.0
         self.idle_production_time = 0.0
         self._last_accrue = 0.0
-        self._deliveries: list[tuple[float, int]] = []
+        self._deliveries: collections.deque[tuple[float, int]] = collections.deque()
+        self._window_sum = 0
         self.idle_workers: set[Unit] = set()
         self.idle_producers: set[Unit] = set()
         self.selection: list[Unit] = []
@@ -222,9 +224,10 @@ class GameCore:
         """Minerals per (real, "faster") minute over the last 15 s, as the game's income shows."""
         window = 336.0
         horizon = self.loop - window
-        self._deliveries = [d for d in self._deliveries if d[0] > horizon]
-        got = sum(n for _, n in self._deliveries)
-        return int(got * 1344.0 / window)
+        dq = self._deliveries
+        while dq and dq[0][0] <= horizon:
+            self._window_sum -= dq.popleft()[1]
+        return int(self._window_sum * 1344.0 / window)
 
     # ------------------------------------------------------------------ motion
 

@@ -122,5 +122,6 @@ class Mining(GameCore):
             self.minerals += u.cargo
             self.collected += u.cargo
             self._deliveries.append((t, u.cargo))
+            self._window_sum += u.cargo
             u.cargo = 0
             self._emit(t, "returned", u)

@@ -56,7 +56,7 @@ _PQ_NAMES = _derive([None, features.ProductionQueue])
 def named(arr: np.ndarray, index_names: list[dict[str, int] | None]) -> np.ndarray:
     """``arr`` as a ``NamedNumpyArray`` without a copy (equal to pysc2's constructor's result)."""
     out = arr.view(named_array.NamedNumpyArray)
-    out._index_names = index_names
+    object.__setattr__(out, "_index_names", index_names)  # what its own __setattr__ does
     return out
 
 

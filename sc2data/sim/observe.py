@@ -105,8 +105,8 @@ class DiskStamp:
     def __call__(self, cx: np.ndarray, cy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """For units at screen pixel coordinates (cx, cy): (canvas pixel inside the disk or the
         sentinel, canvas pixel of the window, coverage), each (N, window²)."""
-        qx = np.clip(cx * self.Q + self._qoff, 0, self._qmax).astype(np.intp)
-        qy = np.clip(cy * self.Q + self._qoff, 0, self._qmax).astype(np.intp)
+        qx = np.minimum(np.maximum(cx * self.Q + self._qoff, 0), self._qmax).astype(np.intp)
+        qy = np.minimum(np.maximum(cy * self.Q + self._qoff, 0), self._qmax).astype(np.intp)
         v = (qy & (self.Q - 1)) * self.Q + (qx & (self.Q - 1))
         base = (qy >> 4) * self.width + (qx >> 4)
         flat = base[:, None] + self.offsets[v]

@@ -4,7 +4,10 @@ Each workload runs in its own fresh process pinned to one CPU core (single-threa
 peak memory is that workload's own: the process's peak RSS (``ru_maxrss``, which includes the
 interpreter and pysc2) and, in a separate untimed pass, the peak of Python allocations made while
 stepping (``tracemalloc``). A repeat is N agent steps from ``reset`` on (episodes restart as they
-end; resets are inside the timing); the table shows the median of the repeats.
+end; resets are inside the timing). The table shows medians over the repeats, in wall-clock
+steps per second and in steps per second of the process's own CPU time: what one dedicated core
+gives; on a shared machine the wall-clock figure also counts time the core gave to others.
+"Time in agent" is the share of wall-clock time spent in ``agent.step``.
 
     python benchmarks/bench_env.py --steps 1800 --repeats 5
 """
@@ -25,16 +28,22 @@ WORKLOADS: tuple[str, ...] = ("env only (no_op)", "random", "reduced-random", "s
 _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 
-def _run(env: Any, agent: Any, steps: int) -> None:
-    """``steps`` agent steps, restarting the episode when it ends."""
+def _run(env: Any, agent: Any, steps: int) -> float:
+    """``steps`` agent steps, restarting the episode when it ends; seconds spent in the agent."""
     agent.setup(env.observation_spec()[0], env.action_spec()[0])
     timestep = env.reset()[0]
     agent.reset()
+    in_agent = 0.0
+    clock = time.perf_counter
     for _ in range(steps):
         if timestep.last():
             timestep = env.reset()[0]
             agent.reset()
-        timestep = env.step([agent.step(timestep)])[0]
+        t0 = clock()
+        call = agent.step(timestep)
+        in_agent += clock() - t0
+        timestep = env.step([call])[0]
+    return in_agent
 
 
 def _agent(workload: str, seed: int) -> Any:
@@ -52,19 +61,23 @@ def _measure(workload: str, backend: str, steps: int, repeats: int, core: int,
 
     env = make_env(backend, seed=0)
     _run(env, _agent(workload, 0), 50)  # warm up: imports, caches, first reset
-    rates = []
+    rates, cpu_rates, shares = [], [], []
     for r in range(repeats):
         agent = _agent(workload, r + 1)
-        t0 = time.perf_counter()
-        _run(env, agent, steps)
-        rates.append(steps / (time.perf_counter() - t0))
+        t0, c0 = time.perf_counter(), time.process_time()
+        in_agent = _run(env, agent, steps)
+        elapsed, cpu = time.perf_counter() - t0, time.process_time() - c0
+        rates.append(steps / elapsed)
+        cpu_rates.append(steps / cpu)
+        shares.append(in_agent / elapsed)
     tracemalloc.start()
     _run(env, _agent(workload, 99), min(steps, 600))
     _, traced_peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     env.close()
     rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # KiB on Linux
-    result.put((rates, rss_mb, traced_peak / 2**20))
+    result.put((rates, statistics.median(cpu_rates), statistics.median(shares), rss_mb,
+                traced_peak / 2**20))
 
 
 def machine() -> str:
@@ -72,7 +85,8 @@ def machine() -> str:
     model = "unknown CPU"
     try:
         with open("/proc/cpuinfo") as f:
-            model = next(line.split(":", 1)[1].strip() for line in f if line.startswith("model name"))
+            model = next(line.split(":", 1)[1].strip() for line in f
+                         if line.startswith("model name"))
     except (OSError, StopIteration):
         pass
     return (f"nproc {os.cpu_count()}, {model}, Python {platform.python_version()}, "
@@ -93,20 +107,22 @@ def main() -> None:
         os.environ[var] = "1"
 
     ctx = mp.get_context("spawn")
-    print(f"machine: {machine()}")
+    print(f"machine: {machine()}; load average before: {os.getloadavg()[0]:.2f}")
     print(f"env {args.env}, {args.steps} agent steps × {args.repeats} repeats, one core "
           f"(#{args.core}), every layer drawn\n")
-    print("| workload | steps/s (median) | min – max | peak RSS (MB) | traced peak (MB) |")
-    print("| --- | ---: | ---: | ---: | ---: |")
+    print("| workload | steps/s (median) | min – max | steps per CPU-second | time in agent "
+          "| peak RSS (MB) | traced peak (MB) |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: |")
     for workload in args.workloads:
         queue = ctx.Queue()
         p = ctx.Process(target=_measure, args=(workload, args.env, args.steps, args.repeats,
                                                args.core, queue))
         p.start()
-        rates, rss, traced = queue.get()
+        rates, cpu_rate, share, rss, traced = queue.get()
         p.join()
         print(f"| {workload} | {statistics.median(rates):,.0f} | "
-              f"{min(rates):,.0f} – {max(rates):,.0f} | {rss:,.0f} | {traced:,.1f} |", flush=True)
+              f"{min(rates):,.0f} – {max(rates):,.0f} | {cpu_rate:,.0f} | {share:.0%} | "
+              f"{rss:,.0f} | {traced:,.1f} |", flush=True)
 
 
 if __name__ == "__main__":

@@ -21,7 +21,7 @@ agent checks ``player.minerals`` itself.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Generator, Iterator
 from typing import Any
 
 import numpy as np
@@ -36,30 +36,42 @@ _P = features.Player
 NO_OP = _F.no_op()
 
 Macro = Iterator[actions.FunctionCall]
-_Gen = Iterator[actions.FunctionCall]  # a sub-macro; its return value says whether it succeeded
+Selecting = Generator[actions.FunctionCall, None, bool]
+"""A sub-macro that selects something; it returns whether the selection is as wanted."""
+
+
+class _NumpyWithOwnRandom:
+    """Stands in for the ``numpy`` module inside pysc2's ``random_agent``, with our RNG."""
+
+    def __init__(self, rng: np.random.RandomState) -> None:
+        self.random = rng
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(np, name)
 
 
 class SeededRandomAgent(random_agent.RandomAgent):
     """pysc2's ``RandomAgent`` with a private, seeded numpy RNG.
 
-    ``RandomAgent.step`` draws from the global ``numpy.random``. We swap our own
-    ``RandomState(seed)`` in for the duration of each step and restore the caller's state after,
-    so the agent is reproducible from its seed and neither disturbs nor is disturbed by anyone
-    else's use of the global RNG. The policy itself is pysc2's code, unchanged.
+    ``RandomAgent.step`` draws from ``numpy.random`` (the global legacy RNG). For the duration
+    of each of our steps, the ``numpy`` name in pysc2's ``random_agent`` module is pointed at a
+    stand-in whose ``random`` is our own ``RandomState(seed)``, so the agent plays exactly what
+    ``numpy.random.seed(seed)`` followed by pysc2's agent would, yet neither disturbs nor is
+    disturbed by anyone else's use of the global RNG. (Swapping the global state in and out
+    instead costs ~10× the agent's own step.) The policy is pysc2's code, unchanged.
     """
 
     def __init__(self, seed: int) -> None:
         super().__init__()
-        self._rng_state: Any = np.random.RandomState(seed).get_state()
+        self._numpy = _NumpyWithOwnRandom(np.random.RandomState(seed))
 
     def step(self, obs: Any) -> actions.FunctionCall:
-        outer = np.random.get_state()
-        np.random.set_state(self._rng_state)
+        module = random_agent.numpy
+        random_agent.numpy = self._numpy
         try:
             return super().step(obs)
         finally:
-            self._rng_state = np.random.get_state()
-            np.random.set_state(outer)
+            random_agent.numpy = module
 
 
 class MacroAgent(base_agent.BaseAgent):
@@ -103,27 +115,30 @@ class MacroAgent(base_agent.BaseAgent):
         assert self.view is not None
         return self.view
 
-    def select_unit(self, unit_type: int, xy: tuple[int, int] | None) -> Iterator[Any]:
-        """Select one unit by clicking the given pixel (skipped if one is selected already)."""
-        if self._v().selected_type() == unit_type:
-            return True
+    def select_unit(self, unit_type: int, xy: tuple[int, int] | None) -> Selecting:
+        """Select the unit under pixel ``xy`` alone (skipped if it is selected already)."""
         if xy is None:
             return False
+        v = self._v()
+        if v.selected_type() == unit_type and v.selected[xy[1], xy[0]]:
+            return True
         yield _F.select_point("select", xy)
         return self._v().selected_type() == unit_type
 
-    def select_scv(self) -> Iterator[Any]:
-        """Select one SCV: an idle one if any, else one clicked on at random."""
+    def select_scv(self) -> Selecting:
+        """Select one SCV off the mineral line, clicked at random (any SCV if none mines).
+
+        Builders come from the mineral line, as players take them; idle SCVs are left to the
+        gather macro. Always a fresh selection: the SCV still selected may be building what we
+        ordered last.
+        """
         v = self._v()
-        if v.selected_type() == units.Terran.SCV:
-            return True
-        if v.player[_P.idle_worker_count] > 0:
-            yield _F.select_idle_worker("select")
-        else:
-            xy = v.random_pixel(v.own(units.Terran.SCV), self.rng)
-            if xy is None:
-                return False
-            yield _F.select_point("select", xy)
+        scvs = v.own(units.Terran.SCV)
+        miners = scvs & v.near(v.minerals(), 3)
+        xy = v.random_pixel(miners if miners.any() else scvs, self.rng)
+        if xy is None:
+            return False
+        yield _F.select_point("select", xy)
         return self._v().selected_type() == units.Terran.SCV
 
     def train_scv(self) -> Macro:
@@ -168,37 +183,57 @@ class MacroAgent(base_agent.BaseAgent):
     def no_op(self) -> Macro:
         yield NO_OP
 
+    def save_up(self, minerals: int, then: Macro, patience: int) -> Macro:
+        """Wait (no_op) until ``minerals`` are banked, then play ``then``; give up after
+        ``patience`` steps. The game takes the cost only when an order is carried out."""
+        for _ in range(patience):
+            if self._v().player[_P.minerals] >= minerals:
+                yield from then
+                return
+            yield NO_OP
+
 
 def _random_spot(rng: np.random.Generator) -> Callable[[ScreenView, int], tuple[int, int] | None]:
     return lambda v, size: v.random_pixel(v.placements(size), rng)
 
 
 class ReducedRandomAgent(MacroAgent):
-    """The paper's random agent over a reduced set of macro actions, picked uniformly."""
+    """The paper's random agent over a reduced set of macro actions, picked uniformly.
+
+    A macro that costs minerals first waits for them (up to ``PATIENCE`` steps), as a player
+    choosing "build a barracks" would: spending whenever possible would leave a uniform random
+    agent too poor to ever afford a barracks.
+    """
 
     MACROS: tuple[str, ...] = ("train_scv", "build_supply_depot", "build_barracks",
                                "train_marine", "gather", "no_op")
+    COST: dict[str, int] = {"train_scv": 50, "build_supply_depot": 100, "build_barracks": 150,
+                            "train_marine": 50}
+    PATIENCE = 60
 
     def next_macro(self) -> Macro:
         name = self.MACROS[int(self.rng.integers(len(self.MACROS)))]
         v = self._v()
         if name == "build_supply_depot":
-            return self.build(_F.Build_SupplyDepot_screen, _random_spot(self.rng), 2)
-        if name == "build_barracks":
-            return self.build(_F.Build_Barracks_screen, _random_spot(self.rng), 3)
-        if name == "train_marine":
-            return self.train_marine(v.random_pixel(v.own(units.Terran.Barracks), self.rng))
-        return getattr(self, name)()
+            macro = self.build(_F.Build_SupplyDepot_screen, _random_spot(self.rng), 2)
+        elif name == "build_barracks":
+            macro = self.build(_F.Build_Barracks_screen, _random_spot(self.rng), 3)
+        elif name == "train_marine":
+            macro = self.train_marine(v.random_pixel(v.own(units.Terran.Barracks), self.rng))
+        else:
+            macro = getattr(self, name)()
+        cost = self.COST.get(name, 0)
+        return self.save_up(cost, macro, self.PATIENCE) if cost else macro
 
 
 class ScriptedAgent(MacroAgent):
     """A build order: SCVs, depots ahead of supply, several barracks, marines nonstop."""
 
-    def __init__(self, seed: int, *, scvs: int = 18, barracks: int = 5, max_supply: int = 200,
+    def __init__(self, seed: int, *, scvs: int = 22, barracks: int = 5, max_supply: int = 200,
                  queue: int = 2) -> None:
         super().__init__(seed)
         self.scvs = scvs
-        """SCVs to train up to (16 saturate 8 mineral fields)."""
+        """Workers to train up to (16 mine 8 fields two to a patch; a few more still pay)."""
         self.barracks = barracks
         self.max_supply = max_supply
         """Supply ceiling: depots stop here, and marines are killed to stay under it."""
@@ -231,7 +266,9 @@ class ScriptedAgent(MacroAgent):
 
         need_depot = (cap < min(self.max_supply, 200) and free <= margin
                       and depots_building <= 0 and self._ready("depot"))
-        reserve = 100 if need_depot else 0
+        # Minerals are spent when the SCV places the building: keep them until it has.
+        reserve = 100 if need_depot or not self._ready("depot") else 0
+        reserve += 0 if self._ready("barracks") else 150
         if need_depot and minerals >= 100 and v.placements(2).any():
             self._hold("depot", 25)  # the SCV walks to the site before the depot shows
             return self.build(_F.Build_SupplyDepot_screen, self._far_spot, 2)
@@ -296,7 +333,13 @@ AGENTS: dict[str, Callable[[int], base_agent.BaseAgent]] = {
 
 
 def make_agent(name: str, *, seed: int) -> base_agent.BaseAgent:
-    """A new agent by registry name, seeded; call ``setup(obs_spec, action_spec)`` before use."""
+    """A new agent by registry name; call ``setup(obs_spec, action_spec)`` before use.
+
+    Seeding: ``random`` draws from its own ``numpy.random.RandomState(seed)`` (the same calls
+    pysc2's agent makes after ``numpy.random.seed(seed)``); ``reduced-random`` and ``scripted``
+    draw from ``numpy.random.default_rng(seed)`` (the scripted agent only to pick which SCV to
+    click). None touches a global RNG, so one seed and one environment seed give one episode.
+    """
     try:
         factory = AGENTS[name]
     except KeyError:

@@ -34,10 +34,13 @@ class Codec:
     """How frame datasets are chunked and compressed (chosen by measurement, BENCHMARKS.md)."""
 
     level: int = 1
-    """Zstandard level; 1 and 3 give the same size on our frames, 1 writes faster."""
-    chunk_frames: int = 4
-    """Frames per chunk. Consecutive frames are near identical, so longer chunks compress better,
-    but a random read decodes a whole chunk per key: 4 balances bytes/frame and random reads."""
+    """Zstandard level. On reduced-random sim frames level 3 saves ~10 % more bytes than level 1
+    but writes slower; level 1 already meets the 2 KB/frame budget at 8-frame chunks."""
+    chunk_frames: int = 8
+    """Frames per chunk. Consecutive frames are near identical, so longer chunks compress far
+    better (paper layers: 4.8 KB/frame at 1, 2.1 KB at 4, 1.4 KB at 8, 1.1 KB at 16). A random
+    read decodes a whole chunk per key, but its cost is dominated by the per-chunk overhead up to
+    8 frames, so 8 is where size stops buying speed (BENCHMARKS.md)."""
 
     def dataset_kwargs(self) -> dict[str, Any]:
         """h5py ``create_dataset`` filter arguments: Zstd then fletcher32, as HDF5 applies them."""

@@ -34,6 +34,45 @@ def version() -> None:
         typer.echo(f"{name} {v}")
 
 
+rules_app = typer.Typer(help="Labelling rules: built-in, from plugins and from --rules-dir.",
+                        no_args_is_help=True, rich_markup_mode=None)
+app.add_typer(rules_app, name="rules")
+
+_RULES_DIR_HELP = "Also load the rules defined by the .py files of this folder."
+
+
+@rules_app.command("list")
+def rules_list(
+    rules_dir: Optional[Path] = typer.Option(None, "--rules-dir", help=_RULES_DIR_HELP),
+) -> None:
+    """List every rule found, validated: id, version, command text and where it comes from."""
+    from sc2data.registry import format_rules, load_registry
+
+    typer.echo(format_rules(load_registry(rules_dir)))
+
+
+@app.command()
+def label(
+    data: Path = typer.Argument(..., help="Dataset folder (from sc2data rollout)."),
+    rules: Optional[str] = typer.Option(None, "--rules", help="Comma-separated rule ids to use "
+                                        "(default: all)."),
+    exclude: Optional[str] = typer.Option(None, "--exclude", help="Comma-separated rule ids to "
+                                          "leave out."),
+    rules_dir: Optional[Path] = typer.Option(None, "--rules-dir", help=_RULES_DIR_HELP),
+    batch_size: int = typer.Option(256, "--batch-size", help="Stacks per rule call."),
+    progress: bool = typer.Option(True, "--progress/--no-progress", help="Show a progress bar."),
+) -> None:
+    """Label every stack of DATA with the rules; writes labels.parquet and stack_labels.parquet."""
+    from sc2data.label import label_dataset
+    from sc2data.registry import parse_ids
+
+    summary = label_dataset(data, include=parse_ids(rules), exclude=parse_ids(exclude) or [],
+                            rules_dir=rules_dir, batch_size=batch_size, progress=progress)
+    if summary.up_to_date:
+        typer.echo("labels are up to date (same rules, same data)")
+    typer.echo(summary.table())
+
+
 @app.command()
 def render(
     out: str = typer.Option(..., "--out", help="PNG file to write."),
@@ -89,6 +128,47 @@ def rollout(
     s = run(config, out, workers=workers, progress=progress)
     typer.echo(f"{s.out}: {s.episodes} episodes, {s.steps:,} stacks in {s.seconds:.1f} s "
                f"({s.shards_written} shards written, {s.shards_kept} kept)")
+
+
+@app.command()
+def pair(
+    recipe: Path = typer.Argument(..., help="Recipe (manifests/*.toml)."),
+    data: Path = typer.Option(..., "--data", help="Labelled dataset folder (sc2data rollout, "
+                                                  "then sc2data label)."),
+    out: Optional[Path] = typer.Option(None, "--out", help="Pair-set folder [default: "
+                                                           "DATA/pairs-<recipe name>]."),
+    progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",
+                                            help="Progress bar (default: on a terminal)."),
+) -> None:
+    """Draw the recipe's matched, mismatched and null pairs; pack the stacks of each split."""
+    from sc2data.pairset import make_pairset
+    from sc2data.recipe import load
+
+    r = load(recipe)
+    s = make_pairset(r, data, out or data / f"pairs-{r.name}", progress=progress)
+    typer.echo(("pair set is up to date (same recipe, same labels): " if s.up_to_date else
+                f"pair set written in {s.seconds:.1f} s: ") + str(s.out))
+    typer.echo(s.table())
+
+
+@app.command()
+def build(
+    recipe: Path = typer.Argument(..., help="Recipe (manifests/*.toml)."),
+    out: Path = typer.Option(..., "--out", help="Build folder (created; rerun to resume)."),
+    workers: int = typer.Option(2, help="Rollout worker processes (the data does not depend "
+                                        "on it)."),
+    progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",
+                                            help="Progress bars (default: on a terminal)."),
+) -> None:
+    """Run a recipe end to end: rollout → label → pair, resuming whatever is already done."""
+    from sc2data.build import PAIRS_DIR, build as run
+    from sc2data.recipe import load
+
+    report = run(load(recipe), out, workers=workers, progress=progress)
+    for line in report.lines:
+        typer.echo(line)
+    typer.echo(report.table())
+    typer.echo(f"train with: sc2data train {out / PAIRS_DIR} --out RUN")
 
 
 @app.command()
@@ -181,7 +261,11 @@ def main(argv: list[str] | None = None) -> None:
     command = typer.main.get_command(app)
     try:
         rc = command.main(args=argv, prog_name="sc2data", standalone_mode=False)
-        if isinstance(rc, int) and rc:  # click returns typer.Exit(code) here, not raising it
+        # Non-standalone click returns typer.Exit(code) instead of raising it; typer turns a
+        # Ctrl-C inside a command into a returned 130.
+        if rc == 130:
+            typer.echo("sc2data: interrupted; rerun the same command to resume", err=True)
+        if isinstance(rc, int) and rc:
             sys.exit(rc)
     except typer.Exit as e:
         sys.exit(e.exit_code)
@@ -200,3 +284,7 @@ def main(argv: list[str] | None = None) -> None:
     except KeyboardInterrupt:
         typer.echo("sc2data: interrupted; rerun the same command to resume", err=True)
         sys.exit(130)
+
+
+if __name__ == "__main__":
+    main()

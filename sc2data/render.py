@@ -90,18 +90,22 @@ def render_frame(obs: Any, path: str | Path) -> Path:
                            "use the project's interface format (64×64)")
     width, height, origins = layout(n_screen, len(named) - n_screen, size)
     canvas = np.full((height, width, 3), 255, np.uint8)
-    for (_, img), (x, y) in zip(named, origins):
+    for (_, img), (x, y) in zip(named, origins, strict=True):
         canvas[y:y + size * SCALE, x:x + size * SCALE] = img.repeat(SCALE, 0).repeat(SCALE, 1)
 
     fig = Figure(figsize=(width / DPI, height / DPI), dpi=DPI)
     fig.figimage(canvas, 0, 0, origin="upper", resize=False)
-    for (name, _), (x, y) in zip(named, origins):
+    for (name, _), (x, y) in zip(named, origins, strict=True):
         fig.text(x / width, 1 - (y - 2) / height, name, fontsize=8, va="bottom", ha="left")
     fig.text(PAD_PX / width, 1 - 4 / height, _header(observation), fontsize=9, va="top",
              ha="left")
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    FigureCanvasAgg(fig).print_png(str(path))
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        FigureCanvasAgg(fig).print_png(str(path))
+    except OSError as e:
+        raise Sc2DataError(f"cannot write the PNG to {path}: {e.strerror or e}; "
+                           "choose a writable --out path") from e
     return path
 
 
@@ -116,9 +120,7 @@ def render_episode(out: str | Path, *, env: str = "sim", seed: int = 0, steps: i
     player = make_agent(agent, seed=seed)
     environment = make_env(env, seed=seed)
     try:
-        last = None
-        for last in play(environment, player, steps + 1):
-            pass
+        *_, last = play(environment, player, steps + 1)
         return render_frame(last, out)
     finally:
         environment.close()

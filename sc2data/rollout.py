@@ -20,6 +20,7 @@ import queue
 import random
 import shutil
 import signal
+import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field
@@ -41,7 +42,6 @@ EnvFactory = Callable[[int], Any]
 """``seed -> environment.Base`` (a pysc2 environment) for one episode."""
 AgentFactory = Callable[[int], Any]
 """``seed -> pysc2 BaseAgent`` for one episode."""
-AGENTS: tuple[str, ...] = ("reduced-random", "random", "scripted")
 LAYER_SETS: tuple[str, ...] = ("paper", "full")
 
 
@@ -132,10 +132,8 @@ def _make_env(backend: str, step_mul: int, seed: int) -> Any:
 
 
 def _make_agent(name: str, seed: int) -> Any:
-    try:
-        from sc2data.agents import make_agent
-    except ImportError:
-        raise Sc2DataError("the agents module is missing from this sc2data install") from None
+    from sc2data.agents import make_agent
+
     return make_agent(name, seed=seed)
 
 
@@ -144,17 +142,17 @@ def default_agent_factory(config: RolloutConfig) -> AgentFactory:
 
 
 # -- one shard ----------------------------------------------------------------------------------
-def play_episode(env: Any, agent: Any, schema: Schema, writer: ShardWriter,
-                 max_steps: int | None, report: Callable[[int], None]) -> int:
+def play_episode(env: Any, agent: Any, writer: ShardWriter, max_steps: int | None,
+                 report: Callable[[int], None]) -> int:
     """Play one episode into ``writer``: frame 0, then (action, frame t+1, reward) per step."""
     timestep = env.reset()[0]
     agent.reset()
-    writer.add_frame(schema.extract(timestep.observation))
+    writer.add_observation(timestep.observation)
     steps = unreported = 0
     while not timestep.last() and (max_steps is None or steps < max_steps):
         call = agent.step(timestep)
         timestep = env.step([call])[0]
-        writer.add_frame(schema.extract(timestep.observation))
+        writer.add_observation(timestep.observation)
         writer.add_step(int(call.function), call.arguments, timestep.reward)
         steps += 1
         unreported += 1
@@ -191,8 +189,7 @@ def write_shard(config: RolloutConfig, out: Path, i: int, env_factory: EnvFactor
     """Play shard ``i``'s episodes into ``shard-i.h5.partial``, then give it its final name."""
     final = out / shard_name(i)
     partial = final.with_name(final.name + PARTIAL)
-    schema = config.schema
-    writer = ShardWriter(partial, schema, config.codec, shard_attrs(config, i))
+    writer = ShardWriter(partial, config.schema, config.codec, shard_attrs(config, i))
     try:
         for episode in config.shard_episodes(i):
             env_seed, agent_seed = episode_seeds(config.seed, episode)
@@ -204,7 +201,7 @@ def write_shard(config: RolloutConfig, out: Path, i: int, env_factory: EnvFactor
                 agent = agent_factory(agent_seed)
                 agent.setup(env.observation_spec()[0], env.action_spec()[0])
                 writer.begin_episode(episode, env_seed, agent_seed)
-                play_episode(env, agent, schema, writer, config.max_steps, report)
+                play_episode(env, agent, writer, config.max_steps, report)
                 writer.end_episode()
             finally:
                 env.close()
@@ -238,7 +235,8 @@ def check_folder(config: RolloutConfig, out: Path) -> None:
         if diff:
             raise Sc2DataError(f"{out} holds a dataset made with other settings (differs in: "
                                f"{', '.join(diff)}); use another --out or delete it")
-    elif out.is_dir() and any(p.name != LOCK for p in out.iterdir()):
+    elif out.is_dir() and any(p.name != LOCK and not p.name.endswith(PARTIAL)
+                              for p in out.iterdir()):  # our own debris is not foreign
         raise Sc2DataError(f"output folder {out} is not empty and is not an sc2data dataset; "
                            f"choose an empty or new folder")
 
@@ -380,8 +378,16 @@ def _run_parallel(config: RolloutConfig, out: Path, todo: list[int], workers: in
     procs = [ctx.Process(target=_worker, args=(tasks, results, config, out, env_factory,
                                                agent_factory, os.getpid()), daemon=True)
              for _ in range(n)]
-    for p in procs:
-        p.start()
+    # Workers inherit an ignored SIGINT, so that a Ctrl-C while they import cannot hit them:
+    # the parent alone handles it, and stops them.
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main_thread else None
+    try:
+        for p in procs:
+            p.start()
+    finally:
+        if main_thread:
+            signal.signal(signal.SIGINT, previous)
     pending = set(todo)
     try:
         while pending:
@@ -452,9 +458,9 @@ def rollout(config: RolloutConfig, out: str | os.PathLike[str], workers: int = 1
             envs.make_env("sc2")  # raises the one-line install hint
         env_factory = default_env_factory(config)
     if agent_factory is None:
-        if config.agent not in AGENTS:
-            raise Sc2DataError(f"unknown agent {config.agent!r}; choose one of: "
-                               f"{', '.join(AGENTS)}")
+        from sc2data.agents import make_agent
+
+        make_agent(config.agent, seed=0)  # an unknown name fails here, before any writing
         agent_factory = default_agent_factory(config)
     started = time.perf_counter()
     made = not out.exists()

@@ -7,6 +7,7 @@ game. Pixels are numpy ``[y, x]``; the points handed to pysc2 are ``(x, y)``.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any
 
@@ -32,21 +33,43 @@ def _rows(a: Any) -> np.ndarray:
 
 
 class ScreenView:
-    """One observation, parsed once per agent step."""
+    """One observation, parsed once per agent step; each part only when first asked for."""
 
     def __init__(self, timestep: Any) -> None:
-        o = timestep.observation
-        screen = o["feature_screen"]
-        self.unit_type = np.asarray(screen[_S.unit_type.index])
-        self.player_relative = np.asarray(screen[_S.player_relative.index])
-        self.buildable = np.asarray(screen[_S.buildable.index]) > 0
-        self.player = np.asarray(o["player"])
-        self.available = frozenset(int(a) for a in np.asarray(o["available_actions"]))
-        self.single_select = _rows(o["single_select"])
-        self.multi_select = _rows(o["multi_select"])
-        self.build_queue = _rows(o["build_queue"])
+        self._obs = timestep.observation
+        self._screen = np.asarray(self._obs["feature_screen"])
+        self.unit_type = self._screen[_S.unit_type.index]
+        self.player = np.asarray(self._obs["player"])
         self.px_per_unit = self.unit_type.shape[1] / CAMERA_WIDTH
         self._placements: dict[int, np.ndarray] = {}
+
+    @functools.cached_property
+    def player_relative(self) -> np.ndarray:
+        return self._screen[_S.player_relative.index]
+
+    @functools.cached_property
+    def buildable(self) -> np.ndarray:
+        return self._screen[_S.buildable.index] > 0
+
+    @functools.cached_property
+    def selected(self) -> np.ndarray:
+        return self._screen[_S.selected.index] > 0
+
+    @functools.cached_property
+    def available(self) -> frozenset[int]:
+        return frozenset(np.asarray(self._obs["available_actions"]).tolist())
+
+    @functools.cached_property
+    def single_select(self) -> np.ndarray:
+        return _rows(self._obs["single_select"])
+
+    @functools.cached_property
+    def multi_select(self) -> np.ndarray:
+        return _rows(self._obs["multi_select"])
+
+    @functools.cached_property
+    def build_queue(self) -> np.ndarray:
+        return _rows(self._obs["build_queue"])
 
     def can(self, call: actions.FunctionCall) -> bool:
         """Whether pysc2 lists the call's function as available now."""
@@ -62,10 +85,19 @@ class ScreenView:
 
     def own(self, *unit_types: int) -> np.ndarray:
         """Pixels showing one of our units of the given types."""
-        return np.isin(self.unit_type, unit_types) & (self.player_relative == _SELF)
+        ut = self.unit_type
+        mask = ut == int(unit_types[0])
+        for t in unit_types[1:]:
+            mask |= ut == int(t)
+        return mask & (self.player_relative == _SELF)
 
     def minerals(self) -> np.ndarray:
         return np.isin(self.unit_type, MINERAL_TYPES)
+
+    @staticmethod
+    def near(mask: np.ndarray, px: int) -> np.ndarray:
+        """Pixels within ``px`` pixels (square distance) of the mask."""
+        return ~_box_clear(mask, px, off_screen=0)
 
     def placements(self, size: int) -> np.ndarray:
         """Pixels where a ``size``×``size`` building can be centred on free, buildable ground.
@@ -84,22 +116,13 @@ class ScreenView:
 
     @staticmethod
     def blobs(mask: np.ndarray) -> list[np.ndarray]:
-        """The 4-connected components of a mask, each as its own mask, in raster order."""
+        """The 4-connected components of a mask, each as its own (read-only) mask, in raster order.
+
+        Structures change rarely, so results are cached by the mask's content.
+        """
         if not mask.any():
             return []
-        big = mask.size
-        label = np.where(mask, np.arange(mask.size).reshape(mask.shape), big)
-        while True:  # propagate the smallest index through each component
-            new = label.copy()
-            np.minimum(new[1:], label[:-1], out=new[1:])
-            np.minimum(new[:-1], label[1:], out=new[:-1])
-            np.minimum(new[:, 1:], label[:, :-1], out=new[:, 1:])
-            np.minimum(new[:, :-1], label[:, 1:], out=new[:, :-1])
-            new[~mask] = big
-            if np.array_equal(new, label):
-                break
-            label = new
-        return [label == i for i in np.unique(label[mask])]
+        return list(_blobs(np.ascontiguousarray(mask, bool).tobytes(), mask.shape))
 
     # --- picking a pixel, as an (x, y) screen point ---
 
@@ -131,12 +154,35 @@ class ScreenView:
         return int(xs[i]), int(ys[i])
 
 
-def _box_clear(blocked: np.ndarray, h: int) -> np.ndarray:
-    """Pixels whose (2h+1)² neighbourhood holds no blocked pixel (off-screen counts as blocked)."""
-    pad = np.pad(blocked.astype(np.int32), h, constant_values=1)
+@functools.lru_cache(maxsize=256)
+def _blobs(packed: bytes, shape: tuple[int, int]) -> tuple[np.ndarray, ...]:
+    mask = np.frombuffer(packed, bool).reshape(shape)
+    big = mask.size  # the label of background pixels, and a fixed point of the jumps below
+    label = np.where(mask, np.arange(big).reshape(shape), big)
+    while True:  # each pixel takes its neighbours' smallest label, then that label's label
+        new = label.copy()
+        np.minimum(new[1:], label[:-1], out=new[1:])
+        np.minimum(new[:-1], label[1:], out=new[:-1])
+        np.minimum(new[:, 1:], label[:, :-1], out=new[:, 1:])
+        np.minimum(new[:, :-1], label[:, 1:], out=new[:, :-1])
+        new[~mask] = big
+        new = np.append(new.ravel(), big)[new]
+        if np.array_equal(new, label):
+            break
+        label = new
+    out = tuple(label == i for i in np.unique(label[mask]))
+    for blob in out:
+        blob.flags.writeable = False
+    return out
+
+
+def _box_clear(blocked: np.ndarray, h: int, off_screen: int = 1) -> np.ndarray:
+    """Pixels whose (2h+1)² neighbourhood holds no blocked pixel (nor off-screen, by default)."""
+    pad = np.pad(blocked.astype(np.int32), h, constant_values=off_screen)
     ii = np.zeros((pad.shape[0] + 1, pad.shape[1] + 1), np.int32)
     ii[1:, 1:] = pad.cumsum(0).cumsum(1)
     n = 2 * h + 1
     rows, cols = blocked.shape
-    box = ii[n:n + rows, n:n + cols] - ii[:rows, n:n + cols] - ii[n:n + rows, :cols] + ii[:rows, :cols]
+    box = (ii[n:n + rows, n:n + cols] - ii[:rows, n:n + cols]
+           - ii[n:n + rows, :cols] + ii[:rows, :cols])
     return box == 0

@@ -1,4 +1,4 @@
-"""make_env: the real-game backend's construction path, unknown backends, and (with SC2) real steps."""
+"""make_env: the real game's construction path, unknown backends, and (with SC2) real steps."""
 
 from __future__ import annotations
 

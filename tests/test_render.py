@@ -77,8 +77,8 @@ def test_colorize_clips_values_beyond_the_palette() -> None:
     assert np.array_equal(img[0, 2], img[0, 1])
 
 
-def test_cli_render_plays_the_simulator_and_writes_the_png(tmp_path: Path,
-                                                          capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_render_plays_the_simulator_and_writes_the_png(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "frame.png"
     assert _run("render", "--steps", "40", "--seed", "3", "--agent", "reduced-random",
                 "--out", str(out)) == 0
@@ -97,3 +97,11 @@ def test_cli_render_unknown_agent_is_one_line(tmp_path: Path,
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["sc2data: error: unknown agent 'grandmaster'; choose one of: random, "
                    "reduced-random, scripted"]
+
+
+def test_unwritable_output_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    assert _run("render", "--steps", "1", "--out", str(blocker / "f.png")) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("sc2data: error: cannot write the PNG to")

@@ -6,7 +6,6 @@ import os
 import signal
 import subprocess
 import sys
-import textwrap
 import time
 from pathlib import Path
 
@@ -17,6 +16,7 @@ import sc2data
 from pysc2.agents import base_agent
 from sc2data._pysc2 import actions
 from sc2data.audit import verify
+from sc2data.cli import main
 from sc2data.dataset import INDEX, MANIFEST
 from sc2data.errors import Sc2DataError
 from sc2data.rollout import RolloutConfig, episode_seeds, rollout
@@ -75,6 +75,16 @@ def test_other_settings_in_the_same_folder_are_refused(tmp_path: Path) -> None:
     assert sorted((p.name, p.stat().st_mtime_ns) for p in out.iterdir()) == before
 
 
+def test_a_run_killed_before_its_manifest_is_resumable(tmp_path: Path) -> None:
+    """A folder holding only our lock and a half-written manifest is ours, not foreign."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / ".lock").write_bytes(b"")
+    (out / "dataset.json.partial").write_bytes(b"{")
+    make_dataset(out, episodes=1)
+    assert verify(out) == [] and not list(out.glob("*.partial"))
+
+
 def test_max_steps_cuts_episodes(tmp_path: Path) -> None:
     s = make_dataset(tmp_path / "out", episodes=2, max_steps=7)
     assert s.steps == 14
@@ -119,33 +129,59 @@ def test_bad_settings_are_refused_before_anything_is_written(tmp_path: Path) -> 
     assert not out.exists()
 
 
-KILL_SCRIPT = textwrap.dedent("""
-    import sys
-    from tests.synthetic_data import make_dataset
-    if __name__ == "__main__":
-        make_dataset(sys.argv[1], workers=2, episodes=12, steps=60)
-""")
+KILL_RUN = ["rollout", "--env", "sim", "--agent", "reduced-random", "--episodes", "6",
+            "--episodes-per-shard", "1", "--max-steps", "300", "--seed", "11", "--no-progress"]
+"""The command the kill test runs: the real simulator and agent, through the CLI."""
 
 
+@pytest.mark.slow
 def test_kill_9_then_rerun_equals_an_uninterrupted_run(tmp_path: Path) -> None:
-    """SIGKILL the rollout (its workers die with it) mid-run; the rerun finishes the job."""
+    """``kill -9`` a two-worker ``sc2data rollout`` mid-run (its workers die with it); running the
+    same command again finishes the job, and the data equals an uninterrupted run's."""
     out = tmp_path / "killed"
-    proc = subprocess.Popen([sys.executable, "-c", KILL_SCRIPT, str(out)], cwd=ROOT,
+    sc2data_cli = Path(sys.executable).with_name("sc2data")
+    proc = subprocess.Popen([sc2data_cli, *KILL_RUN, "--workers", "2", "--out", out], cwd=ROOT,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     deadline = time.monotonic() + 120
     while not list(out.glob("shard-*.h5")) and proc.poll() is None:
         assert time.monotonic() < deadline, "the rollout wrote no shard in time"
-        time.sleep(0.05)
+        time.sleep(0.02)
     assert proc.poll() is None, proc.stderr.read().decode() if proc.stderr else ""
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
     assert not (out / INDEX).exists() and (out / MANIFEST).exists()
-    resumed = make_dataset(out, episodes=12, steps=60)
+    resumed = rollout(RolloutConfig(env="sim", agent="reduced-random", episodes=6,
+                                    episodes_per_shard=1, max_steps=300, seed=11), out,
+                      progress=False)  # the same settings, in this process, with one worker
     assert resumed.shards_kept >= 1 and resumed.shards_written >= 1
     assert verify(out) == []
-    make_dataset(tmp_path / "clean", episodes=12, steps=60)
+    main([*KILL_RUN, "--out", str(tmp_path / "clean")])
     assert shas(out) == shas(tmp_path / "clean")
     a, b = sc2data.open_dataset(out), sc2data.open_dataset(tmp_path / "clean")
-    e, t = np.repeat(np.arange(12), 3), np.tile([0, 30, 59], 12)
+    e, t = np.repeat(np.arange(6), 3), np.tile([0, 150, 299], 6)
     for k, v in a.read(e, t).arrays.items():
         np.testing.assert_array_equal(v, b.read(e, t).arrays[k])
+
+
+@pytest.mark.slow
+def test_ctrl_c_stops_cleanly_and_the_rerun_finishes(tmp_path: Path) -> None:
+    """Ctrl-C (SIGINT to the whole process group, as a terminal sends it) on a two-worker run:
+    exit 130 with a one-line hint, no partial shard left, and the same command finishes."""
+    out = tmp_path / "out"
+    sc2data_cli = Path(sys.executable).with_name("sc2data")
+    cmd = [sc2data_cli, *KILL_RUN, "--workers", "2", "--out", out]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+    deadline = time.monotonic() + 120
+    while not list(out.glob("shard-*.partial")) and proc.poll() is None:
+        assert time.monotonic() < deadline, "the rollout started no shard in time"
+        time.sleep(0.02)
+    os.killpg(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines()[-1] == ("sc2data: interrupted; rerun the same command to "
+                                            "resume")
+    assert "Traceback" not in err
+    assert not list(out.glob("*.partial")) and not (out / INDEX).exists()
+    main([*KILL_RUN, "--out", str(out)])  # the same command, with one worker
+    assert verify(out) == []

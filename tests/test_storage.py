@@ -26,7 +26,7 @@ SCHEMA = Schema.paper()
 
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """5 episodes of 30 steps in 3 shards (2, 2, 1 episodes), 4-frame chunks."""
+    """5 episodes of 30 steps in 3 shards (2, 2, 1 episodes), the default chunking."""
     out = tmp_path_factory.mktemp("ds") / "data"
     make_dataset(out)
     return out
@@ -126,7 +126,8 @@ def test_shard_bytes_depend_only_on_content(tmp_path: Path) -> None:
 def flip_byte_in_chunk(path: Path, key: str, chunk: int = 1) -> None:
     """Damage one byte in the middle of a stored frame chunk."""
     with h5py.File(path, "r") as f:
-        info = f[f"frames/{key}"].id.get_chunk_info_by_coord((chunk * 4, 0, 0))
+        ds = f[f"frames/{key}"]
+        info = ds.id.get_chunk_info_by_coord((chunk * ds.chunks[0], 0, 0))
     with open(path, "r+b") as f:
         f.seek(info.byte_offset + info.size // 2)
         b = f.read(1)
@@ -172,6 +173,41 @@ def test_truncated_and_foreign_files_are_refused(tmp_path: Path) -> None:
         f["x"] = np.zeros(3)
     with pytest.raises(Sc2DataError, match="not an sc2data shard"):
         Shard(path)
+
+
+def test_add_observation_equals_add_frame_of_extract(tmp_path: Path) -> None:
+    """The writer's vectorised observation path stores what Schema.extract gives, and refuses
+    the same out-of-range values."""
+    from sc2data.synthetic import _Scene, render
+
+    scene = _Scene(3)
+    for schema in (SCHEMA, Schema.full()):
+        paths = []
+        for mode in ("frame", "obs"):
+            path = tmp_path / f"{mode}.h5"
+            w = ShardWriter(path, schema, Codec(1, 4), {})
+            w.begin_episode(0, 0, 0)
+            for t in range(0, 60, 10):
+                obs = render(scene, t)
+                w.add_frame(schema.extract(obs)) if mode == "frame" else w.add_observation(obs)
+                if t:
+                    w.add_step(0, [], 0.0)
+            w.end_episode()
+            w.close()
+            paths.append(path)
+        assert paths[0].read_bytes() == paths[1].read_bytes()
+    obs = render(scene, 0)
+    obs["feature_screen"][SCHEMA.screen[6].index, 0, 0] = 5000  # unit_type beyond its scale
+    w = ShardWriter(tmp_path / "bad.h5", SCHEMA, Codec(1, 4), {})
+    with pytest.raises(ValueError, match="screen/unit_type holds values outside"):
+        w.add_observation(obs)
+    with pytest.raises(ValueError, match="screen/unit_type holds values outside"):
+        SCHEMA.extract(obs)
+    obs = render(scene, 0)
+    obs["feature_minimap"][SCHEMA.minimap[3].index, 5, 5] = -1  # camera: negative
+    with pytest.raises(ValueError, match="minimap/camera holds values outside"):
+        w.add_observation(obs)
+    w.abort()
 
 
 def test_flatten_args_pads_and_rejects_too_many() -> None:
@@ -233,6 +269,15 @@ def test_iter_batches_visits_every_stack_in_order(dataset: Path) -> None:
     assert seen_t == list(range(STEPS)) * 5
     loops = np.concatenate(firsts)[:, :, 0]
     assert (loops[:, 1] - loops[:, 0] == 8).all()  # (previous, current) of one episode
+
+
+def test_locate_positions_follows_iteration_order(dataset: Path) -> None:
+    ds = sc2data.open_dataset(dataset)
+    e, t = ds.locate_positions([0, STEPS - 1, STEPS, 4 * STEPS + 2])
+    assert e.tolist() == [0, 0, 1, 4] and t.tolist() == [0, STEPS - 1, 0, 2]
+    assert [a.tolist() for a in ds.locate(STEPS - 1, STEPS + 1)] == [[0, 1], [STEPS - 1, 0]]
+    with pytest.raises(IndexError):
+        ds.locate_positions([len(ds)])
 
 
 def test_cache_does_not_change_results(dataset: Path) -> None:

@@ -2,9 +2,12 @@
 
 Modules, one job each: :mod:`~sc2data.sim.mapdata` (map geometry and game numbers),
 :mod:`~sc2data.sim.store` (unit records and the column store drawing reads),
-:mod:`~sc2data.sim.game` (economy, production, construction, orders, combat),
-:mod:`~sc2data.sim.commands` (pysc2 ``FunctionCall`` validation and execution,
-``available_actions``), :mod:`~sc2data.sim.observe` (feature-layer drawing),
+:mod:`~sc2data.sim.core` (state, clock, orders, death) with its rules in
+:mod:`~sc2data.sim.mining`, :mod:`~sc2data.sim.building` and :mod:`~sc2data.sim.combat`, put
+together as :class:`~sc2data.sim.game.Game`,
+:mod:`~sc2data.sim.codes` (event and result codes), :mod:`~sc2data.sim.commands` (pysc2
+``FunctionCall`` validation, ``available_actions``) with :mod:`~sc2data.sim.handlers` (what
+each function does), :mod:`~sc2data.sim.observe` (feature-layer drawing),
 :mod:`~sc2data.sim.obsdict` (the observation dict) and :mod:`~sc2data.sim.env` (the
 ``environment.Base`` wrapper).
 """

@@ -5,7 +5,8 @@ exceptions, same messages, including its lenient range check that only rejects n
 values), so an agent that works here fails or succeeds the same way on ``SC2Env``.
 ``available_actions`` follows ``features.Features.available_actions``: pysc2's always-available
 UI functions plus the general functions of the abilities on the selection's command cards, the
-cards cut down as BuildMarines cuts them (brief §3).
+cards cut down as BuildMarines cuts them (brief §3). What each function then does is in
+:mod:`sc2data.sim.handlers`.
 """
 
 from __future__ import annotations
@@ -17,7 +18,8 @@ import numpy as np
 
 from sc2data._pysc2 import actions
 from sc2data.sim import mapdata as md
-from sc2data.sim.game import CANT_TARGET_THAT_UNIT, ERROR, Game
+from sc2data.sim.game import Game
+from sc2data.sim.handlers import HANDLERS
 from sc2data.sim.store import PLAYER_SELF, Unit
 
 F = actions.FUNCTIONS
@@ -85,29 +87,39 @@ class Commands:
         self.action_result: list[int] = []
         self.last_actions: list[int] = []
         self._last_idle_tag = 0
+        self._groups: dict[int, list[Unit]] = {}
+        self._groups_version = -1
 
     # ------------------------------------------------------------------ availability
 
+    def _selected_by_type(self) -> dict[int, list[Unit]]:
+        """The selection's own units grouped by type (cached until the selection changes)."""
+        g = self.game
+        if self._groups_version != g.selection_version:
+            groups: dict[int, list[Unit]] = {}
+            for u in g.selection:
+                if u.owner == PLAYER_SELF:
+                    groups.setdefault(u.utype, []).append(u)
+            self._groups = groups
+            self._groups_version = g.selection_version
+        return self._groups
+
     def abilities(self) -> frozenset[tuple[int, bool]]:
-        """The abilities of the selection's command cards (the union over selected units)."""
+        """The abilities of the selection's command cards (the union over selected units).
+
+        A structure under construction shows nothing (its card, Cancel, is cut).
+        """
         g = self.game
         out: set[tuple[int, bool]] = set()
-        seen: set[tuple[int, bool, bool]] = set()
-        for u in g.selection:
-            if u.owner != PLAYER_SELF:
-                continue
-            key = (u.utype, u.complete, u.cargo > 0)
-            if key in seen:
-                continue
-            seen.add(key)
-            if not u.complete:
-                continue  # a structure under construction: its card is cut to nothing
-            out.update(_CARD[u.utype])
-            if u.utype == md.SCV:
-                if u.cargo:
+        for utype, us in self._selected_by_type().items():
+            if utype == md.SCV:
+                out.update(_CARD[utype])
+                if any(u.cargo for u in us):
                     out.add(_RETURN_CARGO)
                 if g.has_completed(md.DEPOT):
                     out.add(_BUILD_BARRACKS)
+            elif utype == md.MARINE or any(u.complete for u in us):
+                out.update(_CARD[utype])
         return frozenset(out)
 
     def production_unit(self) -> Unit | None:
@@ -171,29 +183,35 @@ class Commands:
                     func, func_call.arguments))
             for s, a in zip(sizes, arg):
                 # pysc2's own check, kept as is: only negative values fail it.
-                if not np.all(0 <= a) and np.all(a < s):
+                if type(a) is int:  # the common case, without numpy's overhead
+                    if not 0 <= a and a < s:
+                        raise ValueError("Argument is out of range for %s, got: %s" % (
+                            func, func_call.arguments))
+                elif not np.all(0 <= a) and np.all(a < s):
                     raise ValueError("Argument is out of range for %s, got: %s" % (
                         func, func_call.arguments))
         return {t.name: t.fn(a) for t, a in zip(func.args, func_call.arguments)}
 
     # ------------------------------------------------------------------ execution
 
-    def apply(self, func_call: Any, available: Sequence[int]) -> None:
-        """Validate and carry out one ``FunctionCall`` at the game's current loop."""
-        kw = self.validate(func_call, available)
-        fid = int(func_call.function)
+    def apply_all(self, calls: Sequence[Any], available: Sequence[int]) -> None:
+        """Validate every call (raising before any takes effect), then carry them out in order.
+
+        ``last_actions`` lists the functions that took effect (no_op sends nothing), and
+        ``action_result`` the game's error for each that did not.
+        """
+        checked = [(int(c.function), self.validate(c, available)) for c in calls]
+        self.last_actions = []
         self.action_result = []
-        if fid == 0:
-            self.last_actions = []
-            return
-        self.last_actions = [fid]
-        handler = _HANDLERS.get(fid)
-        if handler is None:  # available but meaningless here (the camera is locked)
-            return
-        err = handler(self, kw)
-        if err:
-            self.action_result = [err]
-            self.last_actions = []
+        for fid, kw in checked:
+            if fid == 0:
+                continue
+            handler = HANDLERS.get(fid)
+            err = handler(self, kw) if handler is not None else 0  # None: the camera is locked
+            if err:
+                self.action_result.append(err)
+            else:
+                self.last_actions.append(fid)
 
     # ---- helpers
 
@@ -230,8 +248,18 @@ class Commands:
         for u in g.selection:
             sel[u.slot] = 0
         g.selection = sorted(set(units), key=lambda u: u.tag)
+        g.selection_version += 1
         for u in g.selection:
             sel[u.slot] = 1
+
+    def own_on_screen(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Own units' slots with their screen centres and pixel radii."""
+        tab = self.game.table
+        slots = np.flatnonzero(tab.alive & (tab.owner == PLAYER_SELF))
+        wx, wy = tab.positions(slots, self.t)
+        sx = (wx - md.SCREEN_X0) * md.PX_PER_UNIT
+        sy = (md.SCREEN_Y0 - wy) * md.PX_PER_UNIT
+        return slots, sx, sy, tab.radius[slots] * md.PX_PER_UNIT
 
     def world_target(self, kw: dict[str, Any]) -> tuple[float, float, Unit | None]:
         """The world point (and unit under it) of a screen or minimap argument."""
@@ -242,254 +270,3 @@ class Commands:
         p = kw["minimap"]
         x, y = md.minimap_to_world(p.x, p.y)
         return x, y, self.unit_at_world(x, y)
-
-
-# ---------------------------------------------------------------------- handlers
-
-
-def _select_point(c: Commands, kw: dict[str, Any]) -> int:
-    act = int(kw["select_point_act"])  # sc2 Select 1, Toggle 2, AllType 3, AddAllType 4
-    u = c.unit_at_screen(kw["screen"])
-    sel = c.game.selection
-    if u is None:
-        if act == 1:
-            c.set_selection([])
-        return 0
-    own = u.owner == PLAYER_SELF
-    mixed = (not own) or any(s.owner != PLAYER_SELF for s in sel)
-    if act == 1 or mixed:
-        c.set_selection([u] if act != 2 or u not in sel else [s for s in sel if s is not u])
-    elif act == 2:
-        c.set_selection([s for s in sel if s is not u] if u in sel else sel + [u])
-    else:
-        same = [v for v in c.game.units.values()
-                if v.utype == u.utype and v.owner == PLAYER_SELF and _on_screen(c, v)]
-        c.set_selection(same if act == 3 else sel + same)
-    return 0
-
-
-def _on_screen(c: Commands, u: Unit) -> bool:
-    x, y = md.world_to_screen(*u.pos(c.t))
-    r = u.data.radius * md.PX_PER_UNIT
-    return -r < x < md.SCREEN + r and -r < y < md.SCREEN + r
-
-
-def _select_rect(c: Commands, kw: dict[str, Any]) -> int:
-    a, b = kw["screen"], kw["screen2"]
-    x0, x1 = min(a.x, b.x), max(a.x, b.x) + 1
-    y0, y1 = min(a.y, b.y), max(a.y, b.y) + 1
-    hits: list[Unit] = []
-    for u in c.game.units.values():
-        if u.owner != PLAYER_SELF:
-            continue
-        ux, uy = md.world_to_screen(*u.pos(c.t))
-        r = u.data.radius * md.PX_PER_UNIT
-        nx, ny = min(max(ux, x0), x1), min(max(uy, y0), y1)
-        if (nx - ux) ** 2 + (ny - uy) ** 2 < r * r:
-            hits.append(u)
-    movers = [u for u in hits if not u.data.structure]
-    if movers:
-        hits = movers  # a box over units and structures selects the units only
-    add = bool(kw["select_add"])
-    c.set_selection(c.game.selection + hits if add else hits)
-    return 0
-
-
-def _select_control_group(c: Commands, kw: dict[str, Any]) -> int:
-    act, gid = int(kw["control_group_act"]), int(kw["control_group_id"])
-    groups = c.game.groups  # sc2 Recall 1, Set 2, Append 3, SetAndSteal 4, AppendAndSteal 5
-    own = [u for u in c.game.selection if u.owner == PLAYER_SELF]
-    if act == 1:
-        if groups[gid]:
-            c.set_selection(list(groups[gid]))
-        return 0
-    if act in (4, 5):
-        for i, g in enumerate(groups):
-            if i != gid:
-                g[:] = [u for u in g if u not in own]
-    if act in (2, 4):
-        groups[gid] = sorted(own, key=lambda u: u.tag)
-    else:
-        groups[gid] = sorted(set(groups[gid]) | set(own), key=lambda u: u.tag)
-    return 0
-
-
-def _select_unit(c: Commands, kw: dict[str, Any]) -> int:
-    act, i = int(kw["select_unit_act"]), int(kw["select_unit_id"])
-    sel = c.game.selection  # sc2 SingleSelect 1, DeselectUnit 2, SelectAllOfType 3, Deselect... 4
-    if i >= len(sel):
-        return ERROR
-    u = sel[i]
-    if act == 1:
-        c.set_selection([u])
-    elif act == 2:
-        c.set_selection([s for s in sel if s is not u])
-    elif act == 3:
-        c.set_selection([s for s in sel if s.utype == u.utype])
-    else:
-        c.set_selection([s for s in sel if s.utype != u.utype])
-    return 0
-
-
-def _select_idle_worker(c: Commands, kw: dict[str, Any]) -> int:
-    act = int(kw["select_worker"])  # sc2 Set 1, Add 2, All 3, AddAll 4
-    idle = sorted(c.game.idle_workers, key=lambda u: u.tag)
-    if act in (3, 4):
-        c.set_selection(idle if act == 3 else c.game.selection + idle)
-        return 0
-    pool = [u for u in idle if u not in c.game.selection] if act == 2 else idle
-    if not pool:
-        return 0
-    nxt = next((u for u in pool if u.tag > c._last_idle_tag), pool[0])
-    c._last_idle_tag = nxt.tag
-    c.set_selection([nxt] if act == 1 else c.game.selection + [nxt])
-    return 0
-
-
-def _select_army(c: Commands, kw: dict[str, Any]) -> int:
-    army = c.game.army()
-    c.set_selection(c.game.selection + army if bool(kw["select_add"]) else army)
-    return 0
-
-
-def _build_queue(c: Commands, kw: dict[str, Any]) -> int:
-    b = c.production_unit()
-    if b is None:
-        return ERROR
-    return c.game.cancel(b, int(kw["build_queue_id"]), c.t)
-
-
-def _train(utype: int, producer: int) -> Any:
-    def handler(c: Commands, kw: dict[str, Any]) -> int:
-        cands = c.own_selected((producer,))
-        if not cands:
-            return ERROR
-        b = min(cands, key=lambda b: (len(b.queue), b.tag))  # the least busy, like the game
-        return c.game.train(b, utype, c.t)
-    return handler
-
-
-def _build(utype: int) -> Any:
-    def handler(c: Commands, kw: dict[str, Any]) -> int:
-        scvs = c.own_selected((md.SCV,))
-        if not scvs:
-            return ERROR
-        x, y, _ = c.world_target(kw)
-        builder = min(scvs, key=lambda u: (_d2(u.pos(c.t), (x, y)), u.tag))
-        return c.game.order_build(builder, utype, x, y, c.t)
-    return handler
-
-
-def _d2(a: tuple[float, float], b: tuple[float, float]) -> float:
-    return (a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2
-
-
-def _gather(c: Commands, kw: dict[str, Any]) -> int:
-    x, y, target = c.world_target(kw)
-    if target is None or target.utype != md.MINERAL:
-        return CANT_TARGET_THAT_UNIT
-    err = 0
-    for u in c.own_selected((md.SCV,)):
-        err = c.game.order_gather(u, target, c.t) or err
-    return err
-
-
-def _return_cargo(c: Commands, kw: dict[str, Any]) -> int:
-    for u in c.own_selected((md.SCV,)):
-        if u.cargo:
-            c.game.order_return(u, c.t)
-    return 0
-
-
-def _marines(c: Commands) -> list[Unit]:
-    return c.own_selected((md.MARINE,))
-
-
-def _attack(c: Commands, kw: dict[str, Any]) -> int:
-    x, y, target = c.world_target(kw)
-    for u in _marines(c):
-        if target is not None and target.owner == PLAYER_SELF and target is not u:
-            c.game.order_attack(u, target, c.t)
-        else:  # attack-move: nothing hostile on this map, so the marines just walk there
-            c.game.order_move(u, x, y, c.t)
-    return 0
-
-
-def _move(c: Commands, kw: dict[str, Any]) -> int:
-    x, y, _ = c.world_target(kw)
-    for u in _marines(c):
-        c.game.order_move(u, x, y, c.t)
-    return 0
-
-
-def _patrol(c: Commands, kw: dict[str, Any]) -> int:
-    x, y, _ = c.world_target(kw)
-    for u in _marines(c):
-        c.game.order_patrol(u, x, y, c.t)
-    return 0
-
-
-def _stop(hold: bool) -> Any:
-    def handler(c: Commands, kw: dict[str, Any]) -> int:
-        for u in _marines(c):
-            c.game.order_idle(u, c.t, hold=hold)
-        return 0
-    return handler
-
-
-def _rally(c: Commands, kw: dict[str, Any], producers: tuple[int, ...] = (md.CC,)) -> int:
-    x, y, target = c.world_target(kw)
-    patch = target if target is not None and target.utype == md.MINERAL else None
-    for b in c.own_selected(producers):
-        b.rally = (x, y, patch if b.utype == md.CC else None)
-    return 0
-
-
-def _smart(c: Commands, kw: dict[str, Any]) -> int:
-    """Right-click: gather / return / resume building / move for SCVs, move for marines,
-    rally for production structures."""
-    x, y, target = c.world_target(kw)
-    g, t = c.game, c.t
-    for u in c.own_selected((md.SCV,)):
-        if target is not None and target.utype == md.MINERAL:
-            g.order_gather(u, target, t)
-        elif target is g.cc and u.cargo:
-            g.order_return(u, t)
-        elif target is not None and target.owner == PLAYER_SELF and target.data.structure \
-                and not target.complete:
-            g.order_resume(u, target, t)
-        else:
-            g.order_move(u, x, y, t)
-    for u in _marines(c):
-        g.order_move(u, x, y, t)
-    _rally(c, kw, _PRODUCERS)
-    return 0
-
-
-_HANDLERS: dict[int, Any] = {
-    int(F.select_point.id): _select_point,
-    int(F.select_rect.id): _select_rect,
-    int(F.select_control_group.id): _select_control_group,
-    int(F.select_unit.id): _select_unit,
-    int(F.select_idle_worker.id): _select_idle_worker,
-    int(F.select_army.id): _select_army,
-    int(F.build_queue.id): _build_queue,
-    int(F.Train_SCV_quick.id): _train(md.SCV, md.CC),
-    int(F.Train_Marine_quick.id): _train(md.MARINE, md.BARRACKS),
-    int(F.Build_SupplyDepot_screen.id): _build(md.DEPOT),
-    int(F.Build_Barracks_screen.id): _build(md.BARRACKS),
-    int(F.Harvest_Gather_screen.id): _gather,
-    int(F.Harvest_Return_quick.id): _return_cargo,
-    int(F.Attack_screen.id): _attack,
-    int(F.Attack_minimap.id): _attack,
-    int(F.Move_screen.id): _move,
-    int(F.Move_minimap.id): _move,
-    int(F.Patrol_screen.id): _patrol,
-    int(F.Patrol_minimap.id): _patrol,
-    int(F.HoldPosition_quick.id): _stop(True),
-    int(F.Stop_quick.id): _stop(False),
-    int(F.Rally_Workers_screen.id): _rally,
-    int(F.Rally_Workers_minimap.id): _rally,
-    int(F.Smart_screen.id): _smart,
-    int(F.Smart_minimap.id): _smart,
-}

@@ -77,7 +77,7 @@ class BuildMarinesEnv(environment.Base):
         self._state = environment.StepType.FIRST
         self._game.events = []
         self.events = []
-        return self._observe(reward=0, discount=0.0)
+        return self._observe(reward=0.0, discount=0.0)
 
     def step(self, actions_: Sequence[Any], step_mul: int | None = None
              ) -> tuple[environment.TimeStep, ...]:
@@ -91,15 +91,10 @@ class BuildMarinesEnv(environment.Base):
             raise ValueError(f"BuildMarinesEnv has one agent; got {len(actions_)} actions")
         calls = actions_[0]
         calls = list(calls) if isinstance(calls, list) else [calls]
-        for call in calls:  # validate all first, as SC2Env transforms all before sending
-            self._commands.validate(call, self._available)
         game = self._game
         game.events = []
-        for call in calls:
-            self._commands.apply(call, self._available)
-        if not calls:
-            self._commands.last_actions = []
-            self._commands.action_result = []
+        # All are validated first, as SC2Env transforms all before sending any.
+        self._commands.apply_all(calls, self._available)
         mul = step_mul or self._step_mul
         if mul <= 0:
             raise ValueError("step_mul should be positive, got {}".format(mul))
@@ -120,7 +115,7 @@ class BuildMarinesEnv(environment.Base):
 
     # ------------------------------------------------------------------ internals
 
-    def _observe(self, reward: int, discount: float) -> tuple[environment.TimeStep, ...]:
+    def _observe(self, reward: float, discount: float) -> tuple[environment.TimeStep, ...]:
         screen, minimap, top = self._renderer.draw(self._game)
         self._commands.top = top
         self._available = self._commands.available()

@@ -120,14 +120,17 @@ BARRACKS = units.Terran.Barracks
 MINERAL = units.Neutral.MineralField
 
 UNIT_DATA: dict[int, UnitData] = {
-    # Speeds are the data's per-game-second values (SCV 2.8125, Marine 2.25) / 16 loops.
+    # Radii and hit points as the game's API reports them for these unit types (a raw-unit dump
+    # of SC2 4.x: SCV and Marine 0.375, CC 2.75, SupplyDepot 1.25, Barracks 1.8125, and 1.125
+    # for mineral fields). Speeds are the data's per-game-second values (SCV 2.8125,
+    # Marine 2.25) / 16 loops.
     SCV: UnitData(SCV, 0.375, 45, minerals=50, build_loops=272, supply_cost=1,
                   speed=2.8125 / LOOPS_PER_GAME_SECOND),
     MARINE: UnitData(MARINE, 0.375, 45, minerals=50, build_loops=400, supply_cost=1,
                      speed=2.25 / LOOPS_PER_GAME_SECOND),
     CC: UnitData(CC, 2.75, 1500, armor=1, minerals=400, build_loops=1600, supply_provided=15,
                  footprint=(5, 5), structure=True),
-    DEPOT: UnitData(DEPOT, 1.375, 400, armor=1, minerals=100, build_loops=480,
+    DEPOT: UnitData(DEPOT, 1.25, 400, armor=1, minerals=100, build_loops=480,
                     supply_provided=8, footprint=(2, 2), structure=True),
     BARRACKS: UnitData(BARRACKS, 1.8125, 1000, armor=1, minerals=150, build_loops=1040,
                        footprint=(3, 3), structure=True),

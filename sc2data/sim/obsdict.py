@@ -17,7 +17,9 @@ from sc2data.sim import mapdata as md
 from sc2data.sim.commands import Commands
 from sc2data.sim.game import Game
 from sc2data.sim.store import PLAYER_SELF, Unit
-from pysc2.lib import named_array
+
+named_array = features.named_array
+"""pysc2's ``named_array`` module (``NamedDict``, ``NamedNumpyArray``), as ``features`` uses it."""
 
 MAP_NAME = "BuildMarines"
 HOME_RACE = 1
@@ -25,6 +27,8 @@ HOME_RACE = 1
 
 _EMPTY_UNITS = np.array([], dtype=np.int32).reshape((0, len(features.UnitLayer)))
 _EMPTY_PQ = np.array([], dtype=np.int32).reshape((0, len(features.ProductionQueue)))
+_EMPTY = np.array([], dtype=np.int32)
+"""Empty arrays are shared by every observation, as pysc2 shares its ``empty_unit``."""
 
 
 def _derive(names: list[Any]) -> list[dict[str, int] | None]:
@@ -52,7 +56,7 @@ _PQ_NAMES = _derive([None, features.ProductionQueue])
 def named(arr: np.ndarray, index_names: list[dict[str, int] | None]) -> np.ndarray:
     """``arr`` as a ``NamedNumpyArray`` without a copy (equal to pysc2's constructor's result)."""
     out = arr.view(named_array.NamedNumpyArray)
-    out._index_names = index_names
+    object.__setattr__(out, "_index_names", index_names)  # what its own __setattr__ does
     return out
 
 
@@ -123,15 +127,15 @@ _ECONOMY = int(features.ScoreCategories.economy)
 
 
 def build(g: Game, c: Commands, screen: np.ndarray, minimap: np.ndarray,
-          available: list[int], hp: np.ndarray, prog: np.ndarray) -> named_array.NamedDict:
-    """The observation dict for the game's current loop (``hp``/``prog``: per-slot values)."""
+          available: list[int], hp: np.ndarray, prog: np.ndarray) -> dict[str, Any]:
+    """The observation ``NamedDict`` at the game's current loop (``hp``/``prog``: per slot)."""
     out = named_array.NamedDict({
         "single_select": _EMPTY_UNITS,
         "multi_select": _EMPTY_UNITS,
         "build_queue": _EMPTY_UNITS,
         "cargo": _EMPTY_UNITS,
         "production_queue": _EMPTY_PQ,
-        "last_actions": np.array([], dtype=np.int32),
+        "last_actions": _EMPTY,
         "cargo_slots_available": np.array([0], dtype=np.int32),
         "home_race_requested": np.array([0], dtype=np.int32),
         "away_race_requested": np.array([0], dtype=np.int32),
@@ -139,9 +143,10 @@ def build(g: Game, c: Commands, screen: np.ndarray, minimap: np.ndarray,
     })
     out["feature_screen"] = named(screen, _SCREEN_NAMES)
     out["feature_minimap"] = named(minimap, _MINIMAP_NAMES)
-    out["last_actions"] = np.array(c.last_actions, dtype=np.int32)
-    out["action_result"] = np.array(c.action_result, dtype=np.int32)
-    out["alerts"] = np.array([], dtype=np.int32)
+    out["last_actions"] = np.array(c.last_actions, dtype=np.int32) if c.last_actions else _EMPTY
+    out["action_result"] = (np.array(c.action_result, dtype=np.int32) if c.action_result
+                            else _EMPTY)
+    out["alerts"] = _EMPTY
     out["game_loop"] = np.array([g.loop], dtype=np.int32)
     out["score_cumulative"], out["score_by_category"], out["score_by_vital"] = score_arrays(g)
     out["player"] = named(np.array([
@@ -167,7 +172,7 @@ def build(g: Game, c: Commands, screen: np.ndarray, minimap: np.ndarray,
                  for i, q in enumerate(b.queue)], dtype=np.int32), _PQ_NAMES)
     elif sel:
         out["multi_select"] = named(unit_rows(g, sel, hp, prog), _UNIT_NAMES)
-    out["upgrades"] = np.array([], dtype=np.int32)
+    out["upgrades"] = _EMPTY
     out["available_actions"] = np.array(available, dtype=np.int32)
     out["home_race_requested"] = np.array([HOME_RACE], dtype=np.int32)
     return out

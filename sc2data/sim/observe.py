@@ -77,14 +77,17 @@ class DiskStamp:
     A unit's centre is split into a whole pixel and a sub-pixel offset quantised to 1/16 px
     (0.02 world units on the screen); for each of the 16×16 offsets the disk mask and coverage
     of the surrounding window are tabulated once, so a frame costs a few array operations
-    whatever the number of units.
+    whatever the number of units. Pixels are addressed on a canvas padded by ``pad`` on every
+    side, so units at the screen's edge need no bounds checks (the caller crops).
     """
 
     Q = 16
 
-    def __init__(self, radius: float, size: int) -> None:
+    def __init__(self, radius: float, size: int, pad: int = 8) -> None:
         self.radius = radius
         self.size = size
+        self.pad = pad
+        self.width = size + 2 * pad
         w = int(2 * radius + 1) + 2
         o = np.arange(w)
         q = (np.arange(self.Q) + 0.5) / self.Q
@@ -94,24 +97,25 @@ class DiskStamp:
         self.disk = d2 <= radius * radius
         self.cov = np.clip(radius + 0.5 - np.sqrt(d2), 0.0, 1.0)
         oy, ox = np.divmod(np.arange(w * w), w)
-        self.ox, self.oy = ox, oy
-        self.sentinel = size * size
+        self.offsets = np.broadcast_to(oy * self.width + ox, (self.Q * self.Q, w * w)).copy()
+        self.sentinel = self.width * self.width
+        self._qoff = (pad - radius - 0.5) * self.Q
+        self._qmax = (self.width - w) * self.Q - 1
 
     def __call__(self, cx: np.ndarray, cy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(flat disk pixel or sentinel, flat covered pixel or sentinel, coverage), each (N, w²)."""
-        bx = cx - (self.radius + 0.5)
-        by = cy - (self.radius + 0.5)
-        fx = np.floor(bx)
-        fy = np.floor(by)
-        v = ((by - fy) * self.Q).astype(np.intp) * self.Q + ((bx - fx) * self.Q).astype(np.intp)
-        x = fx.astype(np.intp)[:, None] + self.ox
-        y = fy.astype(np.intp)[:, None] + self.oy
-        size = self.size
-        inb = (x.view(np.uintp) < size) & (y.view(np.uintp) < size)
-        flat = y * size + x
-        fa = np.where(inb, flat, self.sentinel)
-        fd = np.where(self.disk[v], fa, self.sentinel)
-        return fd, fa, self.cov[v]
+        """For units at screen pixel coordinates (cx, cy): (canvas pixel inside the disk or the
+        sentinel, canvas pixel of the window, coverage), each (N, window²)."""
+        qx = np.minimum(np.maximum(cx * self.Q + self._qoff, 0), self._qmax).astype(np.intp)
+        qy = np.minimum(np.maximum(cy * self.Q + self._qoff, 0), self._qmax).astype(np.intp)
+        v = (qy & (self.Q - 1)) * self.Q + (qx & (self.Q - 1))
+        base = (qy >> 4) * self.width + (qx >> 4)
+        flat = base[:, None] + self.offsets[v]
+        return np.where(self.disk[v], flat, self.sentinel), flat, self.cov[v]
+
+    def crop(self, canvas: np.ndarray) -> np.ndarray:
+        """The ``size``² image inside a flat padded canvas (sentinel entry ignored)."""
+        w, p, n = self.width, self.pad, self.size
+        return canvas[: w * w].reshape(w, w)[p:p + n, p:p + n]
 
 
 class _Layer:
@@ -123,8 +127,21 @@ class _Layer:
     def __init__(self, size: int) -> None:
         self.size = size
         self.top = np.zeros(size * size + 1, dtype=np.intp)
-        self.density = np.zeros(size * size, dtype=np.int64)
-        self.aa = np.zeros(size * size, dtype=np.float64)
+        self.density2d = np.zeros((size, size), dtype=np.int64)
+        self.aa2d = np.zeros((size, size), dtype=np.float64)
+        self.density = self.density2d.reshape(-1)  # flat views of the same memory
+        self.aa = self.aa2d.reshape(-1)
+
+
+def _runs(rows: list[int]) -> list[tuple[int, int]]:
+    """Sorted row indices as contiguous [lo, hi) runs."""
+    out: list[tuple[int, int]] = []
+    for r in rows:
+        if out and out[-1][1] == r:
+            out[-1] = (out[-1][0], r + 1)
+        else:
+            out.append((r, r + 1))
+    return out
 
 
 class Renderer:
@@ -152,11 +169,16 @@ class Renderer:
         self.minimap_base[M.height_map.index] = np.where(m_play, md.HEIGHT_VALUE, 0)
         self.minimap_base[M.visibility_map.index] = np.where(m_play, 2, 0)
         self.minimap_base[M.camera.index] = md.camera_minimap_mask()
+        drawn = set(_UNIT_SCREEN) | {S.unit_density.index, S.unit_density_aa.index}
+        self._screen_static_runs = _runs([i for i in range(len(S)) if i not in drawn])
         self._version = -1
         self._s_static = _Layer(_N)
         self._m_static = _Layer(_NM)
         small = md.UNIT_DATA[md.SCV].radius  # every ground unit here: SCV and Marine, 0.375
         self._s_disk = DiskStamp(small * md.PX_PER_UNIT, _N)
+        self._s_canvas = np.zeros(self._s_disk.sentinel + 1, dtype=np.intp)
+        self._mm_key: tuple[int, int] = (-1, -1)
+        self._mm_cached = self.minimap_base
         self._attr = np.zeros((7, 1), dtype=np.int32)
         self.hp = np.zeros(0)
         self.progress = np.zeros(0)
@@ -166,6 +188,7 @@ class Renderer:
     def _refresh_static(self, g: Game) -> None:
         """Re-stamp structures and mineral fields and the grids, after a footprint changed."""
         self._version = g.grid_version
+        self._mm_key = (-1, -1)
         free = self._playable & ~g.occupied
         for base, idx, name in ((self.screen_base, self._sidx, S),
                                 (self.minimap_base, self._midx, M)):
@@ -188,25 +211,26 @@ class Renderer:
                 layer.top[flat[disk]] = s + 1
                 layer.density += np.bincount(flat[disk], minlength=layer.size ** 2)
                 layer.aa += np.bincount(flat, weights=cov, minlength=layer.size ** 2)
+        d = self._s_disk
+        self._s_canvas = np.zeros(d.sentinel + 1, dtype=np.intp)
+        d.crop(self._s_canvas)[...] = self._s_static.top[:-1].reshape(_N, _N)
 
     # ------------------------------------------------------------------ frame
 
-    @staticmethod
-    def _compose(static: _Layer, disk: DiskStamp, slots: np.ndarray, cx: np.ndarray,
-                 cy: np.ndarray, want_density: bool
-                 ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
-        """Top-unit image (slot + 1), and density and coverage if wanted, of static + ground."""
-        n = static.size * static.size
+    def _screen_units(self, slots: np.ndarray, cx: np.ndarray, cy: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Screen top-unit image (slot + 1, flat), density and coverage: static + ground."""
+        disk = self._s_disk
         fd, fa, cov = disk(cx, cy)
-        top = static.top.copy()
+        canvas = self._s_canvas.copy()
         # Later (higher-tag) units overwrite earlier ones: numpy assigns repeated indices in
-        # order, and the sentinel pixel n takes what falls outside the disk or the image.
-        top[fd.ravel()] = np.repeat(slots + 1, fd.shape[1])
-        top = top[:n]
-        if not want_density:
-            return top, None, None
-        density = static.density + np.bincount(fd.ravel(), minlength=n + 1)[:n]
-        aa = static.aa + np.bincount(fa.ravel(), weights=cov.ravel(), minlength=n + 1)[:n]
+        # order, and the sentinel entry takes the window pixels outside the disks.
+        canvas[fd.ravel()] = np.repeat(slots + 1, fd.shape[1])
+        top = disk.crop(canvas).ravel()
+        n = disk.sentinel + 1
+        density = disk.crop(np.bincount(fd.ravel(), minlength=n)) + self._s_static.density2d
+        aa = disk.crop(np.bincount(fa.ravel(), weights=cov.ravel(), minlength=n)) + \
+            self._s_static.aa2d
         return top, density, aa
 
     def _attributes(self, g: Game, t: float) -> np.ndarray:
@@ -221,16 +245,27 @@ class Renderer:
         self.hp, self.progress = hp, prog
         return a
 
-    def _minimap_top(self, slots: np.ndarray, wx: np.ndarray, wy: np.ndarray) -> np.ndarray:
-        """Minimap top-unit image: structures stamped, each ground unit on the pixel it is in."""
-        n = _NM * _NM
-        ms = _NM / md.MAP_SIZE
-        px = (wx * ms).astype(np.intp)
-        py = ((md.MAP_SIZE - wy) * ms).astype(np.intp)
-        flat = np.where((px.view(np.uintp) < _NM) & (py.view(np.uintp) < _NM), py * _NM + px, n)
-        top = self._m_static.top.copy()
-        top[flat] = slots + 1
-        return top[:n]
+    def _minimap(self, g: Game, attr: np.ndarray, slots: np.ndarray, wx: np.ndarray,
+                 wy: np.ndarray) -> np.ndarray:
+        """The minimap: terrain and structures (cached until a footprint or the selection
+        changes), then each ground unit on the pixel it stands in, later tags on top."""
+        key = (g.grid_version, g.selection_version)
+        if key != self._mm_key:
+            cached = self.minimap_base.copy()
+            cflat = cached.reshape(len(M), _NM * _NM)
+            for row, layer in enumerate(_UNIT_MINIMAP):
+                attr[row].take(self._m_static.top[:-1], out=cflat[layer], mode="clip")
+            self._mm_cached, self._mm_key = cached, key
+        minimap = self._mm_cached.copy()
+        if len(slots):
+            ms = _NM / md.MAP_SIZE
+            px = np.minimum(np.maximum(wx * ms, 0), _NM - 1).astype(np.intp)
+            py = np.minimum(np.maximum((md.MAP_SIZE - wy) * ms, 0), _NM - 1).astype(np.intp)
+            flat = py * _NM + px
+            mflat = minimap.reshape(len(M), _NM * _NM)
+            for row, layer in enumerate(_UNIT_MINIMAP):
+                mflat[layer][flat] = attr[row][slots + 1]
+        return minimap
 
     def draw(self, g: Game) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(feature_screen, feature_minimap, top-unit image) at the game's current loop."""
@@ -243,17 +278,14 @@ class Renderer:
 
         sx = (wx - md.SCREEN_X0) * md.PX_PER_UNIT
         sy = (md.SCREEN_Y0 - wy) * md.PX_PER_UNIT
-        top, density, aa = self._compose(self._s_static, self._s_disk, slots, sx, sy, True)
-        screen = self.screen_base.copy()
+        top, density, aa = self._screen_units(slots, sx, sy)
+        screen = np.empty_like(self.screen_base)
+        for lo, hi in self._screen_static_runs:  # terrain rows and the always-zero rows
+            screen[lo:hi] = self.screen_base[lo:hi]
         flat = screen.reshape(len(S), _N * _N)
         for row, layer in enumerate(_UNIT_SCREEN):
             attr[row].take(top, out=flat[layer], mode="clip")
-        flat[S.unit_density.index] = density
-        flat[S.unit_density_aa.index] = np.minimum(aa * 16.0 + 0.5, 255.0)
-
-        mtop = self._minimap_top(slots, wx, wy)
-        minimap = self.minimap_base.copy()
-        mflat = minimap.reshape(len(M), _NM * _NM)
-        for row, layer in enumerate(_UNIT_MINIMAP):
-            attr[row].take(mtop, out=mflat[layer], mode="clip")
-        return screen, minimap, top.reshape(_N, _N)
+        screen[S.unit_density.index] = density
+        np.minimum(aa * 16.0 + 0.5, 255.0, out=aa)
+        screen[S.unit_density_aa.index] = aa
+        return screen, self._minimap(g, attr, slots, wx, wy), top.reshape(_N, _N)

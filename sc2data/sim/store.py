@@ -20,10 +20,20 @@ from sc2data.sim.mapdata import UNIT_DATA, UnitData
 
 @dataclass(frozen=True)
 class Event:
-    """Something that happened in the game during one agent step (see ``BuildMarinesEnv.events``).
+    """Something that happened in the game during one agent step (``BuildMarinesEnv.events``).
 
-    ``kind`` is one of :data:`EVENT_KINDS`; ``unit_type`` is a pysc2 ``units`` id; ``tag`` the
-    unit's unique tag (for ``queued``/``cancelled``: the producer's tag).
+    ``loop`` is the game loop it happened on, within ``[L − step_mul, L]`` for a step that
+    ends on loop ``L`` (what the step's action did at once happens on ``L − step_mul``);
+    ``unit_type`` a pysc2 ``units`` id; ``tag`` a unit's unique tag. Kinds
+    (:data:`EVENT_KINDS`):
+
+    - ``placed``: an SCV placed a structure, construction started (the new structure).
+    - ``queued``: a unit was added to a train queue (the unit's type, the producer's tag).
+    - ``completed``: a unit finished training or a structure finished building (the new unit).
+    - ``died``: a unit was killed, or a mineral field ran out (the unit).
+    - ``cancelled``: a queued unit was cancelled and refunded (its type, the producer's tag).
+    - ``gathered``: an idle SCV was ordered to mine (the SCV).
+    - ``returned``: an SCV delivered minerals to the CC (the SCV).
     """
 
     loop: int
@@ -130,6 +140,28 @@ class UnitTable:
                   "radius", "hpmax", "ratio_k")
     INT_COLS = ("utype", "owner", "layer", "tag")
     ATTR_ROWS = 7
+
+    # Views into ``f`` / ``i`` / ``attr`` (rebound when the table grows).
+    x0: np.ndarray
+    y0: np.ndarray
+    t0: np.ndarray
+    x1: np.ndarray
+    y1: np.ndarray
+    t1: np.ndarray
+    prog0: np.ndarray
+    pt0: np.ndarray
+    prate: np.ndarray
+    dmg: np.ndarray
+    radius: np.ndarray
+    hpmax: np.ndarray
+    ratio_k: np.ndarray
+    """255 / max hit points (0 for mineral fields): hit points → ``unit_hit_points_ratio``."""
+    utype: np.ndarray
+    owner: np.ndarray
+    layer: np.ndarray
+    """0 for structures and mineral fields, 1 for ground units (drawn on top)."""
+    tag: np.ndarray
+    selected: np.ndarray
 
     def __init__(self, capacity: int = 512) -> None:
         self.capacity = 0

@@ -66,3 +66,11 @@ def test_marines_can_kill_an_scv_and_structures_have_armour() -> None:
         step(env)
     assert depot.dmg > 0 and depot.dmg % 5 == 0  # 6 − 1 armour per shot
     assert of_type(env, md.DEPOT) == [depot]
+
+
+def test_units_stay_in_the_playable_area() -> None:
+    env, a, _ = two_marines()
+    select(env, a)
+    step(env, F.Move_screen("now", [40, 63]))  # south of the playable area's edge (y 19)
+    wait_until(env, lambda: a.order == 0, limit=60)
+    assert a.y1 == md.PLAYABLE[1] + md.UNIT_DATA[md.MARINE].radius

@@ -6,13 +6,14 @@ from typing import Any
 
 import pytest
 
-from sc2data._pysc2 import actions, features
+from sc2data._pysc2 import actions, features, sc2_env
 from sc2data.env import interface_format
 from sc2data.sim import mapdata as md
 from sc2data.sim.commands import functions_for
-from s2clientprotocol import sc2api_pb2 as sc_pb
 
 from sim_helpers import F, new_env, of_type, pixel, scvs, select, step, wait_until
+
+sc_pb = sc2_env.sc_pb
 
 
 def pysc2_error(call: Any, available_abilities: tuple[tuple[int, bool], ...] = (),

@@ -34,7 +34,6 @@ def test_full_episode_ends_with_last_and_reward_is_marines() -> None:
     env = BuildMarinesEnv(seed=5)
     g = env.game
     rax = g._create(md.BARRACKS, 1, *BARRACKS_SITE)
-    g.idle_producers.add(rax)
     (ts,) = env.reset()
     step(env)
     select(env, rax)

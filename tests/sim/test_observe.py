@@ -88,7 +88,8 @@ def test_minimap() -> None:
     assert ys.min() == 27 and ys.max() == 50  # 64 − 37 … 64 − 13
     ut = np.asarray(mm.unit_type)
     ys, xs = np.nonzero(ut == md.CC)
-    assert abs(xs.mean() + 0.5 - md.CC_POS[0]) < 1 and abs(ys.mean() + 0.5 - (64 - md.CC_POS[1])) < 1
+    assert abs(xs.mean() + 0.5 - md.CC_POS[0]) < 1
+    assert abs(ys.mean() + 0.5 - (64 - md.CC_POS[1])) < 1
     assert (ut == md.SCV).sum() >= 6
     assert (np.asarray(mm.player_relative)[ut == md.MINERAL] == 3).all()
 
@@ -126,3 +127,14 @@ def test_units_move_on_screen() -> None:
     after = layer(obs, "unit_type") == md.SCV
     assert (before != after).any()
     assert all(u.alive for u in scvs(env))
+
+
+def test_minimap_shows_new_structures_and_marines() -> None:
+    env, _ = new_env()
+    g = env.game
+    g._create(md.BARRACKS, 1, 38.5, 30.5)
+    m = g._create(md.MARINE, 1, 40.0, 22.0)
+    obs = step(env).observation
+    ut = np.asarray(obs["feature_minimap"].unit_type)
+    assert (ut == md.BARRACKS).sum() >= 9
+    assert ut[int(64 - m.y1), int(m.x1)] == md.MARINE

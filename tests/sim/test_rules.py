@@ -6,8 +6,20 @@ import pytest
 
 from sc2data.sim import mapdata as md
 
-from sim_helpers import (BARRACKS_SITE, DEPOT_SITE, F, build, new_env, of_type, pixel, scvs,
-                         select, step, wait, wait_until)
+from sim_helpers import (
+    BARRACKS_SITE,
+    DEPOT_SITE,
+    F,
+    build,
+    new_env,
+    of_type,
+    pixel,
+    scvs,
+    select,
+    step,
+    wait,
+    wait_until,
+)
 
 
 def test_train_scv_costs_50_and_takes_272_loops() -> None:
@@ -75,7 +87,6 @@ def test_marine_takes_400_loops_and_scores() -> None:
     env, _ = new_env()
     g = env.game
     rax = g._create(md.BARRACKS, 1, *BARRACKS_SITE)
-    g.idle_producers.add(rax)
     g.minerals = 500
     step(env)  # draw it: clicks hit what the last observation showed
     select(env, rax)
@@ -191,3 +202,42 @@ def test_structure_hp_rises_while_built() -> None:
     assert 40 <= hp0 <= 60  # 10% of 400, plus a step's progress
     wait(env, 30)
     assert depot.hp(env.game.loop) > hp0
+
+
+def test_construction_pauses_without_its_scv_and_resumes() -> None:
+    env, _ = new_env()
+    env.game.minerals = 1000
+    build(env, F.Build_SupplyDepot_screen, *DEPOT_SITE)
+    builder = scvs(env)[0]
+    wait_until(env, lambda: bool(of_type(env, md.DEPOT)), limit=100)
+    depot = of_type(env, md.DEPOT)[0]
+    wait(env, 5)
+    patch = of_type(env, md.MINERAL)[0]
+    step(env, F.Harvest_Gather_screen("now", pixel(patch.x1, patch.y1)))  # builder still selected
+    p = depot.progress(env.game.loop)
+    wait(env, 10)
+    assert depot.progress(env.game.loop) == p  # paused
+    select(env, scvs(env)[5])
+    step(env, F.Smart_screen("now", pixel(depot.x1, depot.y1)))
+    wait(env, 20)
+    assert depot.progress(env.game.loop) > p
+    assert depot.builder is scvs(env)[5] and depot.builder is not builder
+
+
+def test_a_field_runs_out() -> None:
+    env, _ = new_env()
+    g = env.game
+    patch = g.patches[0]
+    patch.minerals = 5
+    wait_until(env, lambda: not patch.alive, limit=100)
+    assert any(e.kind == "died" and e.unit_type == md.MINERAL for e in env.events)
+    wait(env, 30)
+    assert all(u.patch is not patch for u in scvs(env))
+    assert len(g.idle_workers) == 0
+
+
+def test_several_actions_in_one_step() -> None:
+    env, _ = new_env()
+    env.game.minerals = 100
+    (ts,) = env.step([[F.select_point("select", pixel(*md.CC_POS)), F.no_op()]])
+    assert ts.observation["single_select"][0].unit_type == md.CC

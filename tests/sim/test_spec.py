@@ -8,10 +8,10 @@ import pytest
 from sc2data._pysc2 import actions, features
 from sc2data.env import interface_format, make_env
 from sc2data.sim import BuildMarinesEnv
-from pysc2.lib import named_array
 
 from sim_helpers import F, new_env, step
 
+named_array = features.named_array
 NAMED = {"feature_screen", "feature_minimap", "player", "score_cumulative",
          "score_by_category", "score_by_vital"}
 

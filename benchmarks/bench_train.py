@@ -28,9 +28,10 @@ import numpy as np
 PAPER_TRAIN, PAPER_VAL, PAPER_EPOCHS = 100_000, 25_000, 20
 
 
-def loader_alone(data: Path, pool: int, categorical: str, passes: int) -> float:
+def loader_alone(data: Path, pool: int, categorical: str, passes: int, gpu: bool) -> float:
     """Pairs/s of a shuffled pass over the train split, as the trainer's loader delivers it
-    (packed in numpy on a CPU; raw, pinned tensors on a GPU machine), with no training."""
+    (packed in numpy for CPU training; raw stacks, pinned if a GPU is present, for GPU
+    training, which packs on the device), with no training."""
     import torch
 
     from sc2data import model as M
@@ -42,10 +43,10 @@ def loader_alone(data: Path, pool: int, categorical: str, passes: int) -> float:
     cfg = M.ModelConfig(categorical=categorical, pool=pool)  # type: ignore[arg-type]
     tables = M.value_tables(ps.schema, [packed.read(0, min(len(packed), 1024))], cfg.max_table)
     model = M.MEM(ps.schema, tables, np.zeros((2, 50), np.float32), cfg)
-    cuda = torch.cuda.is_available()  # as sc2data train: on a GPU, packing runs on the GPU
+    pin = gpu and torch.cuda.is_available()
     loader = PairLoader(packed, p.state, np.zeros(len(p), np.int64), p.target, 32,
-                        model.state.keys(), True, transform=None if cuda else model.state.pack,
-                        collate=lambda rows: M.to_tensors(rows, pin=cuda))
+                        model.state.keys(), True, transform=None if gpu else model.state.pack,
+                        collate=lambda rows: M.to_tensors(rows, pin=pin))
     rates = []
     for e in range(passes):
         t0, n = time.perf_counter(), 0
@@ -57,8 +58,9 @@ def loader_alone(data: Path, pool: int, categorical: str, passes: int) -> float:
 
 
 def training(data: Path, device: str, threads: int | None, amp: bool, pool: int,
-             categorical: str, epochs: int) -> tuple[float, float]:
-    """(train pairs/s, validation pairs/s) of ``sc2data train``, epochs after the first."""
+             categorical: str, epochs: int) -> tuple[float, float, float]:
+    """(train pairs/s, train pairs per CPU-second, validation pairs/s) of ``sc2data train``,
+    epochs after the first."""
     from sc2data.loader import PairSet
     from sc2data.train import TrainConfig, train
 
@@ -68,7 +70,9 @@ def training(data: Path, device: str, threads: int | None, amp: bool, pool: int,
                                 progress=False, overwrite=True))
         rows = [json.loads(l) for l in (run / "metrics.jsonl").read_text().splitlines()][1:]
     n_val = len(PairSet(data).pairs("val"))
+    n_train = len(PairSet(data).pairs("train"))
     return (statistics.median(r["pairs_per_s"] for r in rows),
+            statistics.median(n_train / r["cpu_seconds"] for r in rows),
             statistics.median(n_val / r["val_seconds"] for r in rows))
 
 
@@ -101,21 +105,24 @@ def main() -> None:
     print(f"machine: {platform.platform()}, {os.cpu_count()} CPUs, "
           f"load average {os.getloadavg()[0]:.1f}")
 
-    rate = statistics.median(loader_alone(data, args.pool, args.categorical, 2)
-                             for _ in range(args.repeats))
-    print(f"loader alone (read + decode + shuffle + pack): {rate:,.0f} pairs/s")
+    for gpu in (False, True):
+        rate = statistics.median(loader_alone(data, args.pool, args.categorical, 2, gpu)
+                                 for _ in range(args.repeats))
+        what = "raw stacks, as for GPU training" if gpu else "packed, as for CPU training"
+        print(f"loader alone (read + decode + shuffle, {what}): {rate:,.0f} pairs/s")
     counts = [None] if args.device != "cpu" else [int(t) for t in args.threads.split(",")]
     for threads in counts:
         runs = [training(data, args.device, threads, args.amp, args.pool, args.categorical,
                          args.epochs) for _ in range(args.repeats)]
         tr = statistics.median(r[0] for r in runs)
-        va = statistics.median(r[1] for r in runs)
+        cpu = statistics.median(r[1] for r in runs)
+        va = statistics.median(r[2] for r in runs)
         hours = PAPER_EPOCHS * (PAPER_TRAIN / tr + PAPER_VAL / va) / 3600
         label = f"{args.device}" + (f", {threads} thread(s)" if threads else "") + \
             (", amp" if args.amp else "")
-        print(f"train {label}: {tr:,.0f} pairs/s with the loader in the loop, validation "
-              f"{va:,.0f} pairs/s → paper-size run (100k × 20 epochs + validation) "
-              f"≈ {hours * 60:,.0f} min")
+        print(f"train {label}: {tr:,.0f} pairs/s with the loader in the loop ({cpu:,.0f} per "
+              f"CPU-second of the process), validation {va:,.0f} pairs/s → paper-size run "
+              f"(100k × 20 epochs + validation) ≈ {hours * 60:,.0f} min")
     if tmp is not None:
         tmp.cleanup()
 

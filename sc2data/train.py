@@ -173,7 +173,7 @@ def train(cfg: TrainConfig) -> Path:
     with open(run / "metrics.jsonl", "w") as log:
         for epoch in range(1, cfg.epochs + 1):
             model.train()
-            t0, acc = time.perf_counter(), torch.zeros(3, device=device)
+            t0, c0, acc = time.perf_counter(), time.process_time(), torch.zeros(3, device=device)
             bar = tqdm(train_loader.epoch(epoch), total=len(train_loader), unit="batch",
                        desc=f"epoch {epoch}/{cfg.epochs}", disable=not cfg.progress, leave=False)
             for i, batch in enumerate(bar):
@@ -183,7 +183,7 @@ def train(cfg: TrainConfig) -> Path:
                     bar.set_postfix(loss=f"{e / n:.4f}", acc=f"{c / n:.3f}",
                                     pairs_s=f"{n / (time.perf_counter() - t0):.0f}")
             sums = acc.tolist()
-            seconds = time.perf_counter() - t0
+            seconds, cpu_seconds = time.perf_counter() - t0, time.process_time() - c0
             model.eval()
             vacc, v0 = torch.zeros(3, device=device), time.perf_counter()
             with torch.no_grad():
@@ -198,6 +198,7 @@ def train(cfg: TrainConfig) -> Path:
                    "train_acc": float(sums[1] / sums[2]), "l2": l2, "val_loss": val_loss,
                    "val_acc": float(vsums[1] / vsums[2]) if vsums[2] else float("nan"),
                    "pairs_per_s": float(sums[2] / seconds), "seconds": seconds,
+                   "cpu_seconds": cpu_seconds,
                    "val_seconds": val_seconds}
             # without validation pairs, the last epoch is kept
             row["best"] = bool(val_loss < best) if vsums[2] else True

@@ -260,6 +260,9 @@ class _Tracker:
     def __init__(self) -> None:
         self.attempts: dict[str, list[dict[str, Any]]] = {}
 
+    def reset(self) -> None:
+        self.attempts = {}
+
     def start(self, key: str, token: str, where: str) -> None:
         self.attempts.setdefault(key, []).append(
             {"token": token, "where": where, "done": 0, "news": time.monotonic(), "error": None})
@@ -279,6 +282,23 @@ class _Tracker:
     def poll(self) -> dict[str, list[dict[str, Any]]]:
         now = time.monotonic()
         return {k: [{**a, "idle": now - a["news"]} for a in v] for k, v in self.attempts.items()}
+
+
+_TRACKER: list[Any] = []
+"""``[(node id, job id), handle]`` of this driver's tracker. Kept between runs, because starting
+an actor's process takes seconds, and held here, because Ray ends an actor with its last handle."""
+
+
+def _tracker(ray: Any) -> Any:
+    """This driver's tracker, emptied."""
+    ctx = ray.get_runtime_context()
+    key = (ctx.get_node_id(), ctx.get_job_id())  # a new ray.init means a new node id
+    if _TRACKER and _TRACKER[0] == key:
+        with contextlib.suppress(ray.exceptions.RayActorError):
+            ray.get(_TRACKER[1].reset.remote())
+            return _TRACKER[1]
+    _TRACKER[:] = [key, ray.remote(num_cpus=0)(_Tracker).remote()]
+    return _TRACKER[1]
 
 
 # -- the parent -----------------------------------------------------------------------------------
@@ -350,7 +370,7 @@ def _system_failure(ray: Any, e: BaseException) -> str:
 def drive(ray: Any, remote_fn: Any, tasks: list[_Task], options: RayOptions, bar: Any,
           what: str) -> ScaleoutReport:
     """Run ``tasks`` on Ray with retries and hang detection; feed ``bar``; fail in one line."""
-    tracker = ray.remote(num_cpus=0)(_Tracker).remote()
+    tracker = _tracker(ray)
     allowed = options.retries + 1
     waiting: deque[_Task] = deque(tasks)
     running: dict[Any, _Task] = {}
@@ -378,7 +398,10 @@ def drive(ray: Any, remote_fn: Any, tasks: list[_Task], options: RayOptions, bar
         while waiting or running:
             while waiting and len(running) < (options.workers or len(tasks)):
                 submit(waiting.popleft())
-            ready, _ = ray.wait(list(running), num_returns=len(running), timeout=POLL_S)
+            ready, _ = ray.wait(list(running), num_returns=1, timeout=POLL_S)
+            if ready:  # and whatever else is finished by now
+                ready += ray.wait([r for r in running if r not in ready],
+                                  num_returns=len(running) - 1, timeout=0)[0]
             attempts = ray.get(tracker.poll.remote())
             done = sum(v[-1]["done"] for v in attempts.values())
             bar.update(done - shown)
@@ -425,7 +448,6 @@ def drive(ray: Any, remote_fn: Any, tasks: list[_Task], options: RayOptions, bar
             ray.cancel(ref, force=True)
         if running:
             ray.wait(list(running), num_returns=len(running), timeout=10)
-        ray.kill(tracker)
 
 
 # -- the two stages -------------------------------------------------------------------------------

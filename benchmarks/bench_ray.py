@@ -1,0 +1,103 @@
+"""Rollout on Ray against the local process pool, for BENCHMARKS.md ("Scale-out on Ray").
+
+The same episodes for every variant (embedded simulator, reduced-random agent, paper layers, one
+episode per shard), through the same calls as ``sc2data rollout [--ray]``:
+
+* local, 1 and 2 workers (``rollout(workers=K)``: 1 runs in this process, 2 spawns processes);
+* Ray, 1 and 2 tasks at once, on one local Ray instance with 2 CPUs (``rollout_on_ray``).
+
+Ray's start-up (``ray.init``) is timed on its own, and so is the first Ray run, whose worker
+processes import sc2data cold; the Ray rows are the warm runs after it (the instance and its
+workers persist between runs, as in a session on a cluster), while every local run starts its
+worker processes afresh, as ``sc2data rollout`` does. Each repeat runs every variant once,
+round-robin, into a fresh folder, because the machine is shared; figures are medians, and the
+ratios compare variants within this one run.
+
+    .venv/bin/python benchmarks/bench_ray.py [--episodes 8] [--max-steps 1800] [--repeats 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import shutil
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+from sc2data.rollout import RolloutConfig, rollout
+from sc2data.scaleout import RayOptions, rollout_on_ray
+
+VARIANTS = ("local 1", "local 2", "ray 1", "ray 2")
+
+
+def run(variant: str, config: RolloutConfig, out: Path) -> tuple[float, float]:
+    """(seconds, peak RSS in MB of a Ray task or 0) of one rollout into ``out``."""
+    kind, k = variant.split()
+    t = time.perf_counter()
+    if kind == "local":
+        rollout(config, out, workers=int(k), progress=False)
+        rss = 0.0
+    else:
+        _, report = rollout_on_ray(config, out, RayOptions(workers=int(k)), progress=False)
+        rss = report.peak_rss_mb
+    seconds = time.perf_counter() - t
+    shutil.rmtree(out)
+    return seconds, rss
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--episodes", type=int, default=8)
+    parser.add_argument("--max-steps", type=int, default=1800)
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+    config = RolloutConfig(env="sim", agent="reduced-random", episodes=args.episodes,
+                           episodes_per_shard=1, max_steps=args.max_steps, seed=1)
+    steps = args.episodes * args.max_steps
+
+    import ray
+
+    print(f"# {platform.node()}: {os.cpu_count()} cores (shared), Python "
+          f"{platform.python_version()}, Ray {ray.__version__}; {args.episodes} episodes × "
+          f"{args.max_steps} steps, one per shard; medians of {args.repeats}, load average "
+          f"{os.getloadavg()[0]:.1f} at start\n")
+    t = time.perf_counter()
+    ray.init(num_cpus=2, include_dashboard=False, object_store_memory=200 << 20,
+             log_to_driver=False, logging_level="WARNING")
+    startup = time.perf_counter() - t
+    seconds: dict[str, list[float]] = {v: [] for v in VARIANTS}
+    rss: list[float] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        cold, r = run("ray 2", config, Path(tmp) / "cold")
+        rss.append(r)
+        for j in range(args.repeats):
+            for v in VARIANTS:
+                s, r = run(v, config, Path(tmp) / f"{v.replace(' ', '')}-{j}")
+                seconds[v].append(s)
+                if r:
+                    rss.append(r)
+    t = time.perf_counter()
+    ray.shutdown()
+    shutdown = time.perf_counter() - t
+
+    rate = {v: steps / statistics.median(s) for v, s in seconds.items()}
+    print("| variant | steps/s (median) | min – max | vs local, same K |")
+    print("| --- | ---: | ---: | ---: |")
+    for v in VARIANTS:
+        lo, hi = steps / max(seconds[v]), steps / min(seconds[v])
+        kind, k = v.split()
+        ratio = "" if kind == "local" else f"{rate[v] / rate[f'local {k}']:.2f}"
+        print(f"| {v} | {rate[v]:,.0f} | {lo:,.0f} – {hi:,.0f} | {ratio} |")
+    print(f"\n2 vs 1 worker: local {rate['local 2'] / rate['local 1']:.2f}×, "
+          f"Ray {rate['ray 2'] / rate['ray 1']:.2f}×")
+    print(f"Ray start-up (ray.init, 2 CPUs): {startup:.1f} s; first (cold) Ray run at 2: "
+          f"{steps / cold:,.0f} steps/s ({cold:.1f} s); ray.shutdown: {shutdown:.1f} s")
+    print(f"peak RSS of a simulator task's worker process: {max(rss):.0f} MB "
+          f"(median over runs {statistics.median(rss):.0f} MB)")
+
+
+if __name__ == "__main__":
+    main()

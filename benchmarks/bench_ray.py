@@ -11,9 +11,12 @@ processes import sc2data cold; the Ray rows are the warm runs after it (the inst
 workers persist between runs, as in a session on a cluster), while every local run starts its
 worker processes afresh, as ``sc2data rollout`` does. Each repeat runs every variant once,
 round-robin, into a fresh folder, because the machine is shared; figures are medians, and the
-ratios compare variants within this one run.
+ratios compare variants within this one run. *CPU-s per 1,000 steps* counts every process
+involved — this one, its worker processes, and for Ray its raylet, GCS, workers and tracker (all
+descendants of this process with a local instance) — so it shows the overhead regardless of how
+busy the shared cores are.
 
-    .venv/bin/python benchmarks/bench_ray.py [--episodes 8] [--max-steps 1800] [--repeats 3]
+    .venv/bin/python benchmarks/bench_ray.py [--episodes 8] [--max-steps 1800] [--repeats 5]
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import resource
 import shutil
 import statistics
 import tempfile
@@ -33,9 +37,24 @@ from sc2data.scaleout import RayOptions, rollout_on_ray
 VARIANTS = ("local 1", "local 2", "ray 1", "ray 2")
 
 
-def run(variant: str, config: RolloutConfig, out: Path) -> tuple[float, float]:
-    """(seconds, peak RSS in MB of a Ray task or 0) of one rollout into ``out``."""
+def cpu_seconds() -> float:
+    """CPU time of this process, of its finished children and of its live descendants."""
+    import psutil
+
+    total = sum(getattr(resource.getrusage(who), f) for who in
+                (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN) for f in ("ru_utime", "ru_stime"))
+    for proc in psutil.Process().children(recursive=True):
+        try:
+            total += sum(proc.cpu_times()[:4])  # user, system, and its finished children's
+        except psutil.Error:
+            pass
+    return total
+
+
+def run(variant: str, config: RolloutConfig, out: Path) -> tuple[float, float, float]:
+    """(seconds, CPU seconds, peak RSS in MB of a Ray task or 0) of one rollout into ``out``."""
     kind, k = variant.split()
+    cpu = cpu_seconds()
     t = time.perf_counter()
     if kind == "local":
         rollout(config, out, workers=int(k), progress=False)
@@ -44,8 +63,9 @@ def run(variant: str, config: RolloutConfig, out: Path) -> tuple[float, float]:
         _, report = rollout_on_ray(config, out, RayOptions(workers=int(k)), progress=False)
         rss = report.peak_rss_mb
     seconds = time.perf_counter() - t
+    cpu = cpu_seconds() - cpu
     shutil.rmtree(out)
-    return seconds, rss
+    return seconds, cpu, rss
 
 
 def main() -> None:
@@ -65,18 +85,20 @@ def main() -> None:
           f"{args.max_steps} steps, one per shard; medians of {args.repeats}, load average "
           f"{os.getloadavg()[0]:.1f} at start\n")
     t = time.perf_counter()
-    ray.init(num_cpus=2, include_dashboard=False, object_store_memory=200 << 20,
+    ray.init(address="local", num_cpus=2, include_dashboard=False, object_store_memory=200 << 20,
              log_to_driver=False, logging_level="WARNING")
     startup = time.perf_counter() - t
     seconds: dict[str, list[float]] = {v: [] for v in VARIANTS}
+    cpu: dict[str, list[float]] = {v: [] for v in VARIANTS}
     rss: list[float] = []
     with tempfile.TemporaryDirectory() as tmp:
-        cold, r = run("ray 2", config, Path(tmp) / "cold")
+        cold, _, r = run("ray 2", config, Path(tmp) / "cold")
         rss.append(r)
         for j in range(args.repeats):
             for v in VARIANTS:
-                s, r = run(v, config, Path(tmp) / f"{v.replace(' ', '')}-{j}")
+                s, c, r = run(v, config, Path(tmp) / f"{v.replace(' ', '')}-{j}")
                 seconds[v].append(s)
+                cpu[v].append(c)
                 if r:
                     rss.append(r)
     t = time.perf_counter()
@@ -84,13 +106,17 @@ def main() -> None:
     shutdown = time.perf_counter() - t
 
     rate = {v: steps / statistics.median(s) for v, s in seconds.items()}
-    print("| variant | steps/s (median) | min – max | vs local, same K |")
-    print("| --- | ---: | ---: | ---: |")
+    per_k = {v: 1000 * statistics.median(c) / steps for v, c in cpu.items()}
+    print("| variant | steps/s (median) | min – max | vs local, same K | CPU-s per 1,000 steps "
+          "| vs local, same K |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: |")
     for v in VARIANTS:
         lo, hi = steps / max(seconds[v]), steps / min(seconds[v])
         kind, k = v.split()
         ratio = "" if kind == "local" else f"{rate[v] / rate[f'local {k}']:.2f}"
-        print(f"| {v} | {rate[v]:,.0f} | {lo:,.0f} – {hi:,.0f} | {ratio} |")
+        cpu_ratio = "" if kind == "local" else f"{per_k[v] / per_k[f'local {k}']:.2f}"
+        print(f"| {v} | {rate[v]:,.0f} | {lo:,.0f} – {hi:,.0f} | {ratio} | {per_k[v]:.2f} | "
+              f"{cpu_ratio} |")
     print(f"\n2 vs 1 worker: local {rate['local 2'] / rate['local 1']:.2f}×, "
           f"Ray {rate['ray 2'] / rate['ray 1']:.2f}×")
     print(f"Ray start-up (ray.init, 2 CPUs): {startup:.1f} s; first (cold) Ray run at 2: "

@@ -54,6 +54,8 @@ LABEL_MEMORY_MB = 1024
 """Memory requested per label task (a read of 4,096 stacks of the keys the rules need)."""
 LOCAL_OBJECT_STORE = 200 << 20
 """Object store of a local instance: tasks return only small summaries."""
+SUBREAPER = "RAY_kill_child_processes_on_worker_exit_with_raylet_subreaper"
+"""Ray setting: the raylet kills what a dead worker started (its SC2 instance), within 10 s."""
 POLL_S = 0.5
 """How often the parent looks at the tasks (progress bar, hang check)."""
 _REPORT_EVERY_S = 0.5
@@ -128,8 +130,12 @@ def connect(options: RayOptions) -> Iterator[Any]:
     quiet = {"log_to_driver": False, "logging_level": "WARNING"}
     try:
         if options.address is None:
-            ray.init(num_cpus=options.workers or os.cpu_count(), include_dashboard=False,
-                     object_store_memory=LOCAL_OBJECT_STORE, **quiet)
+            # A worker killed mid-task (hang, OOM) would orphan its SC2 process: have the raylet
+            # reap it (docs/ray.md says to set the same on every node of a cluster).
+            os.environ.setdefault(SUBREAPER, "1")
+            # "local": a new instance, even where `ray start` made one this machine's default.
+            ray.init(address="local", num_cpus=options.workers or os.cpu_count(),
+                     include_dashboard=False, object_store_memory=LOCAL_OBJECT_STORE, **quiet)
         else:
             ray.init(address=options.address, **quiet)
     except (ConnectionError, RuntimeError, ValueError) as e:
@@ -337,19 +343,16 @@ class _Task:
     """Ray's retries for the current submission."""
 
 
-def _outcomes(attempts: list[dict[str, Any]], cancelled: dict[str, str], finished: bool,
-              last_error: str | None) -> list[str]:
-    """One line per attempt: done, or why it ended."""
+def _outcomes(attempts: list[dict[str, Any]], cancelled: dict[str, str]) -> list[str]:
+    """One line per attempt of a finished task: done (the last), or why it ended."""
     lines = []
     for j, a in enumerate(attempts):
         if a["token"] in cancelled:
             why = cancelled[a["token"]]
         elif a["error"] is not None:
             why = f"failed: {a['error']}"
-        elif j == len(attempts) - 1 and finished:
+        elif j == len(attempts) - 1:
             why = "done"
-        elif j == len(attempts) - 1 and last_error is not None:
-            why = last_error
         else:
             why = "its worker process died (killed, out of memory, or its node was lost)"
         lines.append(f"({a['where']}): {why}")
@@ -389,19 +392,19 @@ def drive(ray: Any, remote_fn: Any, tasks: list[_Task], options: RayOptions, bar
         return Sc2DataError(f"{what} of {task.key} failed after {n} attempt(s) (retries: "
                             f"{options.retries}): {reason}; rerun the same command to resume")
 
-    def record(task: _Task, finished: bool, last_error: str | None = None) -> None:
+    def record(task: _Task) -> None:
         tries = attempts.get(task.key, [])
-        if len(tries) > 1 or (tries and not finished):
-            report.retried[task.key] = _outcomes(tries, cancelled, finished, last_error)
+        if len(tries) > 1:
+            report.retried[task.key] = _outcomes(tries, cancelled)
 
     try:
         while waiting or running:
             while waiting and len(running) < (options.workers or len(tasks)):
                 submit(waiting.popleft())
             ready, _ = ray.wait(list(running), num_returns=1, timeout=POLL_S)
-            if ready:  # and whatever else is finished by now
-                ready += ray.wait([r for r in running if r not in ready],
-                                  num_returns=len(running) - 1, timeout=0)[0]
+            others = [r for r in running if r not in ready]
+            if ready and others:  # and whatever else is finished by now
+                ready += ray.wait(others, num_returns=len(others), timeout=0)[0]
             attempts = ray.get(tracker.poll.remote())
             done = sum(v[-1]["done"] for v in attempts.values())
             bar.update(done - shown)
@@ -425,7 +428,7 @@ def drive(ray: Any, remote_fn: Any, tasks: list[_Task], options: RayOptions, bar
                 report.peak_rss_mb = max(report.peak_rss_mb, result["rss_mb"])
                 report.peak_children_rss_mb = max(report.peak_children_rss_mb,
                                                   result["children_rss_mb"])
-                record(task, finished=True)
+                record(task)
             for ref, task in list(running.items()):
                 mine = attempts.get(task.key, [])[task.seen:]
                 if not mine or mine[-1]["idle"] < options.timeout_s:
@@ -441,7 +444,7 @@ def drive(ray: Any, remote_fn: Any, tasks: list[_Task], options: RayOptions, bar
         attempts = ray.get(tracker.poll.remote())
         for task in tasks:  # reasons that reached the tracker after the task's result
             if task.key in report.retried:
-                record(task, finished=True)
+                record(task)
         return report
     finally:
         for ref in running:  # failed or interrupted: stop the rest before cleaning up
@@ -468,6 +471,8 @@ class RayShards:
         from sc2data.dataset import PARTIAL, shard_name
         from sc2data.provenance import versions
 
+        if not todo:
+            return
         ray = require_ray()
         fn = ray.remote(num_cpus=1, memory=_memory(self.options, TASK_MEMORY_MB[config.env]),
                         retry_exceptions=list(transient_errors()))(_rollout_task)
@@ -508,6 +513,8 @@ class RayUnits:
 
     def __call__(self, todo: Sequence[tuple[Any, Path]], keys: Sequence[str], batch_size: int,
                  bar: Any) -> None:
+        if not todo:
+            return
         ray = require_ray()
         fn = ray.remote(num_cpus=1, memory=_memory(self.options, LABEL_MEMORY_MB),
                         retry_exceptions=list(transient_errors()))(_label_task)

@@ -48,7 +48,7 @@ def ray_instance() -> Any:
     """One local Ray instance with 2 CPUs for the module; this module's fault-injecting agents
     travel to the workers by value (the workers cannot import ``tests``)."""
     ray = pytest.importorskip("ray")
-    ray.init(num_cpus=2, include_dashboard=False, object_store_memory=100 << 20,
+    ray.init(address="local", num_cpus=2, include_dashboard=False, object_store_memory=100 << 20,
              log_to_driver=False, logging_level="WARNING")
     ray.cloudpickle.register_pickle_by_value(sys.modules[__name__])
     yield ray

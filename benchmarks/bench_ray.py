@@ -11,7 +11,8 @@ processes import sc2data cold; the Ray rows are the warm runs after it (the inst
 workers persist between runs, as in a session on a cluster), while every local run starts its
 worker processes afresh, as ``sc2data rollout`` does. Each repeat runs every variant once,
 round-robin, into a fresh folder, because the machine is shared; figures are medians, and the
-ratios compare variants within this one run. *CPU-s per 1,000 steps* counts every process
+ratios compare variants within this one run. Last, ``--tiny`` shards of one step each show
+the fixed cost per task and per run. *CPU-s per 1,000 steps* counts every process
 involved — this one, its worker processes, and for Ray its raylet, GCS, workers and tracker (all
 descendants of this process with a local instance) — so it shows the overhead regardless of how
 busy the shared cores are.
@@ -72,7 +73,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=8)
     parser.add_argument("--max-steps", type=int, default=1800)
-    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--tiny", type=int, default=32, help="one-step shards for fixed costs")
     args = parser.parse_args()
     config = RolloutConfig(env="sim", agent="reduced-random", episodes=args.episodes,
                            episodes_per_shard=1, max_steps=args.max_steps, seed=1)
@@ -101,6 +103,13 @@ def main() -> None:
                 cpu[v].append(c)
                 if r:
                     rss.append(r)
+        # Fixed costs: many one-step shards, where the playing is next to nothing.
+        tiny = RolloutConfig(env="sim", agent="reduced-random", episodes=args.tiny,
+                             episodes_per_shard=1, max_steps=1, seed=1)
+        fixed: dict[str, list[float]] = {"local 1": [], "ray 1": [], "ray 2": []}
+        for j in range(args.repeats):
+            for v, times in fixed.items():
+                times.append(run(v, tiny, Path(tmp) / f"tiny-{v.replace(' ', '')}-{j}")[0])
     t = time.perf_counter()
     ray.shutdown()
     shutdown = time.perf_counter() - t
@@ -121,6 +130,11 @@ def main() -> None:
           f"Ray {rate['ray 2'] / rate['ray 1']:.2f}×")
     print(f"Ray start-up (ray.init, 2 CPUs): {startup:.1f} s; first (cold) Ray run at 2: "
           f"{steps / cold:,.0f} steps/s ({cold:.1f} s); ray.shutdown: {shutdown:.1f} s")
+    med = {v: statistics.median(x) for v, x in fixed.items()}
+    print(f"{args.tiny} one-step shards: local 1 {med['local 1']:.2f} s, Ray 1 "
+          f"{med['ray 1']:.2f} s, Ray 2 {med['ray 2']:.2f} s: Ray costs "
+          f"{1000 * (med['ray 1'] - med['local 1']) / args.tiny:.0f} ms more per task, one at a "
+          f"time")
     print(f"peak RSS of a simulator task's worker process: {max(rss):.0f} MB "
           f"(median over runs {statistics.median(rss):.0f} MB)")
 

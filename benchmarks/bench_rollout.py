@@ -41,7 +41,8 @@ TARGET_EVENTS = 10_000
 
 def cpu_seconds() -> float:
     """CPU time of this process and of its finished children (the workers)."""
-    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
     return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
@@ -149,7 +150,7 @@ def main() -> None:
     print(f"events per {args.agent} episode (mean of {args.episodes}, sim event record): "
           + ", ".join(f"{k} {v:.1f} (min {min(events[k])}, max {max(events[k])})"
                       for k, v in per.items()))
-    need = max(TARGET_EVENTS / max(per["barracks"], 1e-9), TARGET_EVENTS / max(per["marines"], 1e-9))
+    need = max(TARGET_EVENTS / max(per[k], 1e-9) for k in ("barracks", "marines"))
     episodes_needed = int(np.ceil(need))
     seconds = episodes_needed * EPISODE_STEPS / med["k2"]
     print(f"≥ {TARGET_EVENTS:,} barracks placed and ≥ {TARGET_EVENTS:,} marines completed need "

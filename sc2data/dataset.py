@@ -62,7 +62,8 @@ def write_atomic(path: Path, data: bytes) -> None:
 
 
 def write_manifest(folder: Path, manifest: dict[str, Any]) -> None:
-    write_atomic(folder / MANIFEST, (json.dumps(manifest, indent=2, sort_keys=True) + "\n").encode())
+    text = json.dumps(manifest, indent=2, sort_keys=True) + "\n"
+    write_atomic(folder / MANIFEST, text.encode())
 
 
 def write_index(folder: Path, rows: Sequence[dict[str, Any]]) -> None:

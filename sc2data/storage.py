@@ -97,7 +97,8 @@ class ShardWriter:
             # Integers stay integers for any HDF5 tool; everything else is JSON, unambiguously.
             self._file.attrs[k] = v if type(v) is int else json.dumps(v)
         c = codec.chunk_frames
-        self._shapes = {l.key: (schema.size(l.group),) * 2 for l in schema.layers}
+        self._shapes: dict[str, tuple[int, ...]] = {
+            l.key: (schema.size(l.group),) * 2 for l in schema.layers}
         self._shapes.update({v.name: (v.size,) for v in schema.vectors})
         self._dtypes = {l.key: l.dtype for l in schema.layers}
         self._dtypes.update({v.name: v.dtype for v in schema.vectors})

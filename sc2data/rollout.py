@@ -166,22 +166,26 @@ def shard_attrs(config: RolloutConfig, i: int) -> dict[str, Any]:
             "episode_start": span.start, "episode_stop": span.stop}
 
 
-def index_rows(path: Path) -> list[dict[str, Any]]:
-    """Index rows of a complete shard: its episode table plus the file's sha256 and size."""
+def index_rows(path: Path, name: str | None = None) -> list[dict[str, Any]]:
+    """Index rows of a complete shard (listed as ``name``, default its file name): its episode
+    table plus the file's sha256 and size."""
     shard = Shard(path)
     try:
         table = shard.episodes
     finally:
         shard.close()
     digest, size = sha256_file(path), path.stat().st_size
-    return [{"shard": path.name, **{c: (float(v[j]) if c == "reward" else int(v[j]))
+    return [{"shard": name or path.name, **{c: (float(v[j]) if c == "reward" else int(v[j]))
                                     for c, v in table.items()},
              "shard_sha256": digest, "shard_bytes": size} for j in range(len(table["episode"]))]
 
 
 def write_shard(config: RolloutConfig, out: Path, env_factory: EnvFactory,
-                agent_factory: AgentFactory, i: int, report: Callable[[int], None]) -> None:
-    """Play shard ``i``'s episodes into ``shard-i.h5.partial``, then give it its final name."""
+                agent_factory: AgentFactory, i: int, report: Callable[[int], None]
+                ) -> list[dict[str, Any]]:
+    """Play shard ``i``'s episodes into ``shard-i.h5.partial``, then give it its final name.
+
+    Returns the shard's index rows (hashed here, so that K workers hash in parallel)."""
     final = out / shard_name(i)
     partial = final.with_name(final.name + PARTIAL)
     writer = ShardWriter(partial, config.schema, config.codec, shard_attrs(config, i))
@@ -205,8 +209,10 @@ def write_shard(config: RolloutConfig, out: Path, env_factory: EnvFactory,
         writer.abort()
         partial.unlink(missing_ok=True)
         raise
+    rows = index_rows(partial, final.name)
     os.replace(partial, final)
     fsync_path(out)
+    return rows
 
 
 # -- the folder ---------------------------------------------------------------------------------
@@ -345,13 +351,13 @@ def rollout(config: RolloutConfig, out: str | os.PathLike[str], workers: int = 1
         with _progress(total, progress) as bar:
             job = functools.partial(write_shard, config, out, env_factory, agent_factory)
             if workers == 1 or len(todo) <= 1:
-                for i in todo:
-                    job(i, bar.update)
+                written = {i: job(i, bar.update) for i in todo}
             else:
-                run_parallel(job, todo, workers, out, bar.update, shard_name)
+                written = run_parallel(job, todo, workers, out, bar.update, shard_name)
             bar.total = bar.n
             bar.refresh()
-        rows = [row for i in range(config.n_shards) for row in index_rows(out / shard_name(i))]
+        rows = [row for i in range(config.n_shards)
+                for row in written.get(i) or index_rows(out / shard_name(i))]
         write_index(out, rows)
     return RolloutSummary(out, len(todo), config.n_shards - len(todo), len(rows),
                           sum(r["n_steps"] for r in rows), time.perf_counter() - started)

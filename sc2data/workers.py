@@ -27,8 +27,9 @@ from sc2data.errors import Sc2DataError
 
 Report = Callable[[int], None]
 """Called by a job with the number of steps played since its last call."""
-Job = Callable[[int, Report], None]
-"""Writes one shard: ``job(shard index, report)``; must be picklable (spawned workers)."""
+Job = Callable[[int, Report], Any]
+"""Writes one shard: ``job(shard index, report)``, returning a picklable result; must itself be
+picklable (spawned workers)."""
 
 LOCK = ".lock"
 _LOCK_WAIT_S = 10.0
@@ -92,17 +93,18 @@ def _worker(tasks: Any, results: Any, job: Job, out: Path, parent: int) -> None:
     with FolderLock(out, exclusive=False):
         while (i := tasks.get()) is not None:
             try:
-                job(i, report)
+                result = job(i, report)
             except BaseException as e:  # noqa: BLE001 - reported to the parent, which fails
                 results.put(("error", i, str(e) if isinstance(e, Sc2DataError)
                              else f"{type(e).__name__}: {e}"))
                 return
-            results.put(("done", i, None))
+            results.put(("done", i, result))
 
 
 def run_parallel(job: Job, todo: list[int], workers: int, out: Path, on_steps: Report,
-                 describe: Callable[[int], str]) -> None:
-    """Run ``job`` for every shard in ``todo`` on ``workers`` processes writing into ``out``."""
+                 describe: Callable[[int], str]) -> dict[int, Any]:
+    """Run ``job`` for every shard in ``todo`` on ``workers`` processes writing into ``out``;
+    returns each shard's result."""
     # spawn, not forkserver: a forkserver's children are not ours, so they would outlive a
     # ``kill -9`` of this process; spawned ones are, and die with it (_die_with_parent).
     ctx = mp.get_context("spawn")
@@ -125,6 +127,7 @@ def run_parallel(job: Job, todo: list[int], workers: int, out: Path, on_steps: R
         if main_thread:
             signal.signal(signal.SIGINT, previous)
     pending = set(todo)
+    done: dict[int, Any] = {}
     try:
         while pending:
             try:
@@ -139,6 +142,7 @@ def run_parallel(job: Job, todo: list[int], workers: int, out: Path, on_steps: R
                 on_steps(msg[1])
             elif msg[0] == "done":
                 pending.discard(msg[1])
+                done[msg[1]] = msg[2]
             else:
                 raise Sc2DataError(f"rollout of {describe(msg[1])} failed: {msg[2]}")
     finally:
@@ -150,3 +154,4 @@ def run_parallel(job: Job, todo: list[int], workers: int, out: Path, on_steps: R
         if pending:  # interrupted or failed: leave no half-written shard behind
             for stale in out.glob(f"*{PARTIAL}"):
                 stale.unlink(missing_ok=True)
+    return done

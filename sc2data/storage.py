@@ -278,13 +278,26 @@ class FrameSource:
             self._table = (offset, size, mask)
         return self._table
 
+    @property
+    def fast(self) -> bool:
+        """True when chunks come raw off the memory map (then use :meth:`raw_chunks`)."""
+        return self._mm is not None
+
+    def raw_chunks(self, ids: np.ndarray) -> tuple[list[bytes], list[int]]:
+        """Fast path: the stored bytes (payload + checksum) and filter masks of chunks ``ids``,
+        for a :class:`~sc2data.chunks.ChunkDecoder` to verify and decode."""
+        assert self._mm is not None
+        offset, size, mask = self._chunk_table()
+        mm = self._mm
+        raws = [mm[o:o + n] for o, n in zip(offset[ids].tolist(), size[ids].tolist())]
+        return raws, mask[ids].tolist()
+
     def read_chunks(self, ids: np.ndarray) -> list[bytes]:
         """The decoded bytes of chunks ``ids`` (``chunk_bytes`` each, the last zero padded)."""
         if self._mm is not None:
-            offset, size, mask = self._chunk_table()
-            mm = self._mm
-            raws = [mm[o:o + n] for o, n in zip(offset[ids].tolist(), size[ids].tolist())]
-            return self._decoder.decode(raws, mask[ids].tolist(), self.chunk_bytes, self.where)
+            raws, masks = self.raw_chunks(ids)
+            return self._decoder.decode(raws, masks, [self.chunk_bytes] * len(raws),
+                                        [self.where] * len(raws))
         c, out = self.chunk_frames, []
         for i in np.asarray(ids).tolist():
             block = np.zeros((c, *self.frame_shape), self.dtype)

@@ -150,6 +150,22 @@ def test_flipped_byte_is_caught_by_both_paths(tmp_path: Path) -> None:
         shard.close()
 
 
+def test_reading_a_damaged_chunk_raises(dataset: Path, tmp_path: Path) -> None:
+    """open_dataset's reads verify checksums too: the damaged chunk fails, the others read."""
+    import shutil
+
+    copy = Path(shutil.copytree(dataset, tmp_path / "d"))
+    flip_byte_in_chunk(copy / "shard-00000.h5", "screen/unit_hit_points", chunk=1)
+    ds = sc2data.open_dataset(copy, cache_bytes=0)
+    c = Codec().chunk_frames
+    with pytest.raises(ChecksumError, match=r"shard-00000.h5:screen/unit_hit_points: fletcher32"):
+        ds.read([0], [c])
+    with pytest.raises(Sc2DataError):
+        ds.read([0], [c + 1], keys=["screen/unit_hit_points"])
+    ds.read([0], [c], keys=["screen/unit_type", "player"])
+    ds.read([0, 1], [0, 5])
+
+
 def test_shard_of_another_schema_version_is_refused(tmp_path: Path) -> None:
     path = tmp_path / "s.h5"
     write_shard(path)

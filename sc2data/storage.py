@@ -144,16 +144,17 @@ class ShardWriter:
         """
         slot = self._n_frames % self.codec.chunk_frames
         for obs_key, index, scale, buffers, layers in self._groups:
-            planes = np.asarray(obs[obs_key])[index]
+            planes = np.asarray(obs[obs_key])
+            flat = planes.reshape(len(planes), -1)
             if planes.dtype == np.int32:  # one pass: negatives read as unsigned exceed any scale
-                bad = planes.view(np.uint32).max(axis=(1, 2)) >= scale
+                bad = flat.view(np.uint32).max(axis=1)[index] >= scale
             else:
-                bad = (planes.max(axis=(1, 2)) >= scale) | (planes.min(axis=(1, 2)) < 0)
+                bad = (flat.max(axis=1)[index] >= scale) | (flat.min(axis=1)[index] < 0)
             if bad.any():
                 l = layers[int(np.flatnonzero(bad)[0])]
                 raise ValueError(f"{l.key} holds values outside [0, {l.scale})")
-            for buf, plane in zip(buffers, planes):
-                buf[slot] = plane
+            for buf, i in zip(buffers, index.tolist()):
+                buf[slot] = planes[i]
         for name, buf in self._vectors:
             buf[slot] = np.asarray(obs[name]).reshape(buf.shape[1:])
         self._next_frame()

@@ -71,6 +71,10 @@ def fsync_path(path: Path) -> None:
         os.close(fd)
 
 
+class ObservationError(Sc2DataError, ValueError):
+    """An observation the schema cannot store losslessly (a value outside its layer's scale)."""
+
+
 def sha256_file(path: Path) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as f:
@@ -152,7 +156,12 @@ class ShardWriter:
                 bad = (flat.max(axis=1)[index] >= scale) | (flat.min(axis=1)[index] < 0)
             if bad.any():
                 l = layers[int(np.flatnonzero(bad)[0])]
-                raise ValueError(f"{l.key} holds values outside [0, {l.scale})")
+                plane = planes[l.index]
+                raise ObservationError(
+                    f"frame {self._n_frames - (self._current or {}).get('frame_start', 0)} of "
+                    f"episode {(self._current or {}).get('episode')}: {l.key} holds values "
+                    f"outside [0, {l.scale}) (min {plane.min()}, max {plane.max()}); the "
+                    f"environment broke pysc2's declared scale, so it cannot be stored losslessly")
             for buf, i in zip(buffers, index.tolist()):
                 buf[slot] = planes[i]
         for name, buf in self._vectors:
@@ -378,5 +387,5 @@ def _first_line(e: BaseException) -> str:
     return str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
 
 
-__all__ = ["ARG_WIDTH", "ChecksumError", "FrameSource", "Shard", "ShardWriter", "flatten_args",
-           "function_call", "fsync_path", "sha256_file"]
+__all__ = ["ARG_WIDTH", "ChecksumError", "FrameSource", "ObservationError", "Shard",
+           "ShardWriter", "flatten_args", "function_call", "fsync_path", "sha256_file"]

@@ -215,7 +215,9 @@ def test_add_observation_equals_add_frame_of_extract(tmp_path: Path) -> None:
     obs = render(scene, 0)
     obs["feature_screen"][SCHEMA.screen[6].index, 0, 0] = 5000  # unit_type beyond its scale
     w = ShardWriter(tmp_path / "bad.h5", SCHEMA, Codec(1, 4), {})
-    with pytest.raises(ValueError, match="screen/unit_type holds values outside"):
+    w.begin_episode(7, 0, 0)
+    with pytest.raises(Sc2DataError, match=r"frame 0 of episode 7: screen/unit_type holds values "
+                                           r"outside \[0, 1962\) \(min 0, max 5000\)"):
         w.add_observation(obs)
     with pytest.raises(ValueError, match="screen/unit_type holds values outside"):
         SCHEMA.extract(obs)

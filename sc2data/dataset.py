@@ -27,7 +27,7 @@ import pyarrow.parquet as pq
 from sc2data.chunks import ChunkDecoder
 from sc2data.errors import Sc2DataError
 from sc2data.schema import Schema, SchemaError, StackBatch
-from sc2data.storage import Shard, fsync_path
+from sc2data.storage import FrameSource, Shard, fsync_path
 
 DATASET_FORMAT = "sc2data-dataset"
 DATASET_FORMAT_VERSION = 1
@@ -262,7 +262,7 @@ class Dataset:
         call decodes, of all keys, are verified together in one vectorised pass.
         """
         shard, cache = self._shard(si), self._cache
-        plans = []
+        plans: list[tuple[str, FrameSource, np.ndarray, np.ndarray, list[bytes | None]]] = []
         raws: list[bytes] = []
         masks: list[int] = []
         sizes: list[int] = []
@@ -290,9 +290,11 @@ class Dataset:
                 plans[p][4][j] = data
         out = {}
         for key, src, ids, inverse, datas in plans:
-            for i, data in zip(ids.tolist(), datas):
-                cache.put((si, key, i), data)  # type: ignore[arg-type]
-            buf = np.frombuffer(datas[0] if len(datas) == 1 else b"".join(datas),  # type: ignore[arg-type]
+            chunks = [d for d in datas if d is not None]
+            assert len(chunks) == len(datas)
+            for i, chunk in zip(ids.tolist(), chunks):
+                cache.put((si, key, i), chunk)
+            buf = np.frombuffer(chunks[0] if len(chunks) == 1 else b"".join(chunks),
                                 src.dtype).reshape(-1, *src.frame_shape)
             out[key] = (buf, inverse.reshape(-1) * src.chunk_frames + frames % src.chunk_frames)
         return out

@@ -44,8 +44,8 @@ def loader_alone(data: Path, pool: int, categorical: str, passes: int) -> float:
     model = M.MEM(ps.schema, tables, np.zeros((2, 50), np.float32), cfg)
     cuda = torch.cuda.is_available()  # as sc2data train: on a GPU, packing runs on the GPU
     loader = PairLoader(packed, p.state, np.zeros(len(p), np.int64), p.target, 32,
-                        model.state.keys(), True, transform=lambda a: M.to_tensors(a, pin=True)
-                        if cuda else M.to_tensors(model.state.pack(a)))
+                        model.state.keys(), True, transform=None if cuda else model.state.pack,
+                        collate=lambda rows: M.to_tensors(rows, pin=cuda))
     rates = []
     for e in range(passes):
         t0, n = time.perf_counter(), 0
@@ -80,7 +80,7 @@ def main() -> None:
     ap.add_argument("--threads", default="1,2", help="torch CPU thread counts to try")
     ap.add_argument("--amp", action="store_true")
     ap.add_argument("--pool", type=int, default=2)
-    ap.add_argument("--categorical", default="embed")
+    ap.add_argument("--categorical", default="onehot")
     ap.add_argument("--epochs", type=int, default=3, help="per run; the first is a warm-up")
     ap.add_argument("--repeats", type=int, default=1)
     args = ap.parse_args()

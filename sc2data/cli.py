@@ -208,9 +208,9 @@ def train_cmd(
     vectors: Optional[Path] = typer.Option(None, help="word2vec/GloVe/fastText file "
                                            "[default: GloVe 6B-50d]."),
     vocab_size: int = typer.Option(50_000, help="Words kept from the vectors."),
-    categorical: str = typer.Option("embed", help="Categorical layers: embed, onehot, scalar."),
+    categorical: str = typer.Option("onehot", help="Categorical layers: onehot, embed, scalar."),
     pool: int = typer.Option(2, help="Pool spatial layers p×p into cell shares (1 = off)."),
-    threads: Optional[int] = typer.Option(None, help="torch CPU threads."),
+    threads: Optional[int] = typer.Option(None, help="torch CPU threads [default: cores - 1]."),
     amp: bool = typer.Option(False, help="bfloat16 autocast on CUDA."),
     overwrite: bool = typer.Option(False, help="Reuse a non-empty run folder."),
     progress: bool = typer.Option(True, help="Show the progress bar."),

@@ -132,7 +132,7 @@ class PairSet:
 @dataclass
 class Batch:
     """A batch of pairs: stacks by schema key ``(b, 2, …)`` (or as the loader's ``transform``
-    made them), text index, target, pair index."""
+    and ``collate`` made them), text index, target, pair index."""
 
     arrays: Any
     text: np.ndarray
@@ -144,13 +144,20 @@ class Batch:
 
 
 class PairLoader:
-    """Batches of one split's pairs; random block order and in-window shuffles when ``shuffle``."""
+    """Batches of one split's pairs; random block order and in-window shuffles when ``shuffle``.
+
+    ``transform`` maps a decoded window's arrays (rows = stacks) to other arrays with rows first
+    — the model's input packing, done once per stack however many pairs use it; ``collate`` maps
+    a batch's rows (e.g. to tensors). Both run in the loader's thread.
+    """
 
     def __init__(self, packed: PackedSplit, state: np.ndarray, text: np.ndarray,
                  target: np.ndarray, batch_size: int, keys: Sequence[str], shuffle: bool,
-                 seed: int = 0, window: int = 8, prefetch: int = 16,
-                 transform: Callable[[dict[str, np.ndarray]], Any] | None = None) -> None:
-        self.packed, self.keys, self.transform = packed, list(keys), transform
+                 seed: int = 0, window: int = 4, prefetch: int = 16,
+                 transform: Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]] | None = None,
+                 collate: Callable[[dict[str, np.ndarray]], Any] | None = None) -> None:
+        self.packed, self.keys = packed, list(keys)
+        self.transform, self.collate = transform, collate
         self.state, self.text, self.target = state, text, target
         self.batch_size, self.shuffle, self.seed = batch_size, shuffle, seed
         self.window, self.prefetch = window, prefetch
@@ -179,6 +186,8 @@ class PairLoader:
             parts = [self.packed.read(b * BLOCK, min((b + 1) * BLOCK, len(self.packed)),
                                       self.keys) for b in chosen]
             arrays = {k: np.concatenate([p.arrays[k] for p in parts]) for k in self.keys}
+            if self.transform:  # once per stack, not once per pair
+                arrays = self.transform(arrays)
             offset = {b: sum(len(p) for p in parts[:i]) for i, (b, p) in
                       enumerate(zip(chosen, parts))}
             pairs = np.concatenate([self._pairs_of_block[b] for b in chosen])
@@ -190,7 +199,7 @@ class PairLoader:
             for s in range(0, len(pairs), self.batch_size):
                 p, r = pairs[s:s + self.batch_size], rows[s:s + self.batch_size]
                 stacks = {k: a[r] for k, a in arrays.items()}
-                yield Batch(self.transform(stacks) if self.transform else stacks, self.text[p],
+                yield Batch(self.collate(stacks) if self.collate else stacks, self.text[p],
                             self.target[p], p)
 
 

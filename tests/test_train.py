@@ -163,3 +163,14 @@ def test_cli_bad_options_are_one_line_errors(option: list[str], needles: list[st
     code, _, err = run_cli(["train", str(data), "--out", str(tmp_path / "run"), "--epochs", "1",
                             "--no-progress", *option], capsys)
     assert_one_line_error(code, err, *needles)
+
+
+def test_without_torch_the_cli_names_the_extra_to_install(data: Path, tmp_path: Path,
+                                                          monkeypatch: pytest.MonkeyPatch,
+                                                          capsys: pytest.CaptureFixture[str]
+                                                          ) -> None:
+    import sys
+
+    monkeypatch.setitem(sys.modules, "torch", None)  # import torch now raises ImportError
+    code, _, err = run_cli(["train", str(data), "--out", str(tmp_path / "run")], capsys)
+    assert_one_line_error(code, err, "'torch'", "pip install 'sc2data[train]'")

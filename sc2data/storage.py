@@ -72,7 +72,7 @@ def fsync_path(path: Path) -> None:
 
 
 class ObservationError(Sc2DataError, ValueError):
-    """An observation the schema cannot store losslessly (a value outside its layer's scale)."""
+    """An observation the schema cannot store losslessly (a value its layer's dtype cannot hold)."""
 
 
 def sha256_file(path: Path) -> str:
@@ -114,7 +114,7 @@ class ShardWriter:
         self._ids = [(self._frames[k].id, (0,) * len(self._shapes[k]), self._buffers[k])
                      for k in schema.keys()]
         self._groups = [(f"feature_{g}", np.array([l.index for l in schema.group(g)]),
-                         np.array([l.scale for l in schema.group(g)]),
+                         np.array([l.limit for l in schema.group(g)]),
                          [self._buffers[l.key] for l in schema.group(g)], schema.group(g))
                         for g in ("screen", "minimap") if schema.group(g)]
         self._vectors = [(v.name, self._buffers[v.name]) for v in schema.vectors]
@@ -147,21 +147,21 @@ class ShardWriter:
         same lossless range check, but one vectorised check per group and no intermediate copy.
         """
         slot = self._n_frames % self.codec.chunk_frames
-        for obs_key, index, scale, buffers, layers in self._groups:
+        for obs_key, index, limit, buffers, layers in self._groups:
             planes = np.asarray(obs[obs_key])
             flat = planes.reshape(len(planes), -1)
-            if planes.dtype == np.int32:  # one pass: negatives read as unsigned exceed any scale
-                bad = flat.view(np.uint32).max(axis=1)[index] >= scale
+            if planes.dtype == np.int32:  # one pass: negatives read as unsigned exceed any limit
+                bad = flat.view(np.uint32).max(axis=1)[index] >= limit
             else:
-                bad = (flat.max(axis=1)[index] >= scale) | (flat.min(axis=1)[index] < 0)
+                bad = (flat.max(axis=1)[index] >= limit) | (flat.min(axis=1)[index] < 0)
             if bad.any():
                 l = layers[int(np.flatnonzero(bad)[0])]
                 plane = planes[l.index]
                 raise ObservationError(
                     f"frame {self._n_frames - (self._current or {}).get('frame_start', 0)} of "
                     f"episode {(self._current or {}).get('episode')}: {l.key} holds values "
-                    f"outside [0, {l.scale}) (min {plane.min()}, max {plane.max()}); the "
-                    f"environment broke pysc2's declared scale, so it cannot be stored losslessly")
+                    f"outside [0, {l.limit}) (min {plane.min()}, max {plane.max()}), which its "
+                    f"{l.dtype} cannot store losslessly")
             for buf, i in zip(buffers, index.tolist()):
                 buf[slot] = planes[i]
         for name, buf in self._vectors:

@@ -213,11 +213,11 @@ def test_add_observation_equals_add_frame_of_extract(tmp_path: Path) -> None:
             paths.append(path)
         assert paths[0].read_bytes() == paths[1].read_bytes()
     obs = render(scene, 0)
-    obs["feature_screen"][SCHEMA.screen[6].index, 0, 0] = 5000  # unit_type beyond its scale
+    obs["feature_screen"][SCHEMA.screen[6].index, 0, 0] = 70000  # unit_type beyond uint16
     w = ShardWriter(tmp_path / "bad.h5", SCHEMA, Codec(1, 4), {})
     w.begin_episode(7, 0, 0)
     with pytest.raises(Sc2DataError, match=r"frame 0 of episode 7: screen/unit_type holds values "
-                                           r"outside \[0, 1962\) \(min 0, max 5000\)"):
+                                           r"outside \[0, 65536\) \(min 0, max 70000\)"):
         w.add_observation(obs)
     with pytest.raises(ValueError, match="screen/unit_type holds values outside"):
         SCHEMA.extract(obs)
@@ -225,6 +225,21 @@ def test_add_observation_equals_add_frame_of_extract(tmp_path: Path) -> None:
     obs["feature_minimap"][SCHEMA.minimap[3].index, 5, 5] = -1  # camera: negative
     with pytest.raises(ValueError, match="minimap/camera holds values outside"):
         w.add_observation(obs)
+    w.abort()
+
+
+def test_counts_past_the_nominal_scale_are_kept(tmp_path: Path) -> None:
+    """pysc2 declares unit_density's scale as 16 but does not clip: 20 units on a pixel is a
+    real value, and it fits the layer's uint8, so it is stored, not refused."""
+    from sc2data.synthetic import _Scene, render
+
+    obs = render(_Scene(3), 0)
+    density = next(l for l in SCHEMA.screen if l.name == "unit_density")
+    obs["feature_screen"][density.index, 4, 4] = 20
+    assert SCHEMA.extract(obs)[density.key][4, 4] == 20
+    w = ShardWriter(tmp_path / "dense.h5", SCHEMA, Codec(1, 4), {})
+    w.begin_episode(0, 0, 0)
+    w.add_observation(obs)
     w.abort()
 
 

@@ -8,15 +8,13 @@ Why not "collected minerals rose": twelve or more SCVs deliver all the time on B
 that fires on about half of all stacks and would leave no null states. Sending idle workers back to
 the minerals is the player's decision the command names, and it is a minority event.
 
-Known limits, measured on simulator rollouts (tests/rules/test_sim_agreement.py): a two-frame
-stack cannot tell an idle SCV sent to *build* from one sent to mine — both leave the idle count at
-once, and a building's cost is only paid when the SCV arrives, steps later — and an SCV going idle
-(its building done) in the very step another is sent to mine keeps the count level. Against the
-simulator's record of idle SCVs sent to mine ("gathered"), with the reduced random agent (whose
-build macro prefers idle SCVs), precision is 85–92% and recall about 96%; against what the stack
-can show — "an idle SCV was given work", on steps where no SCV went idle — both are 100%. The
-direction the SCV walks is the only other difference, and over one step (≈4 px) it does not
-separate the two reliably.
+Known limits: a two-frame stack cannot tell an idle SCV sent to *build* from one sent to mine —
+both leave the idle count at once, and a building's cost is only paid when the SCV arrives, steps
+later — and an SCV going idle (its building done) in the very step another is sent to mine keeps
+the count level. Our agents take builders off the mineral line, as players do, so the first case is
+rare in their data. Against the simulator's record of idle SCVs sent to mine ("gathered"), over 4
+reduced-random and 2 scripted episodes: precision 99.2%, recall 98.3% (119 events); on steps where
+no SCV went idle, both ≥ 99% (tests/rules/test_sim_agreement.py).
 """
 
 from __future__ import annotations

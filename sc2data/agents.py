@@ -126,20 +126,19 @@ class MacroAgent(base_agent.BaseAgent):
         return self._v().selected_type() == unit_type
 
     def select_scv(self) -> Selecting:
-        """Select one SCV: an idle one if any, else a miner (not a builder) clicked at random.
+        """Select one SCV off the mineral line, clicked at random (any SCV if none mines).
 
-        Always a fresh selection: the SCV still selected may be building what we ordered last.
+        Builders come from the mineral line, as players take them; idle SCVs are left to the
+        gather macro. Always a fresh selection: the SCV still selected may be building what we
+        ordered last.
         """
         v = self._v()
-        if v.player[_P.idle_worker_count] > 0:
-            yield _F.select_idle_worker("select")
-        else:
-            scvs = v.own(units.Terran.SCV)
-            miners = scvs & v.near(v.minerals(), 3)
-            xy = v.random_pixel(miners if miners.any() else scvs, self.rng)
-            if xy is None:
-                return False
-            yield _F.select_point("select", xy)
+        scvs = v.own(units.Terran.SCV)
+        miners = scvs & v.near(v.minerals(), 3)
+        xy = v.random_pixel(miners if miners.any() else scvs, self.rng)
+        if xy is None:
+            return False
+        yield _F.select_point("select", xy)
         return self._v().selected_type() == units.Terran.SCV
 
     def train_scv(self) -> Macro:

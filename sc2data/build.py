@@ -13,6 +13,7 @@ only does what is left.
 from __future__ import annotations
 
 import os
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -56,7 +57,8 @@ def build(recipe: Recipe, out: str | os.PathLike[str], *, workers: int = 1,
                         f"({r.shards_written} shards written, {r.shards_kept} kept)")
 
     t = time.perf_counter()
-    labels = label_dataset(data, include=list(recipe.rule_ids), progress=progress is not False)
+    labels = label_dataset(data, include=list(recipe.rule_ids),
+                           progress=sys.stderr.isatty() if progress is None else progress)
     report.seconds["label"] = time.perf_counter() - t
     report.lines.append(labels.table())
 

@@ -271,6 +271,68 @@ def verify(folder: Path = typer.Argument(..., help="Dataset folder.")) -> None:
     typer.echo(f"{folder}: OK")
 
 
+@app.command("train")
+def train_cmd(
+    data: Path = typer.Argument(..., help="Pair-set folder (sc2data pair / build output)."),
+    out: Optional[Path] = typer.Option(None, "--out", help="Run folder [default: "
+                                       "runs/{recipe}__{seed}__{time}]."),
+    epochs: int = typer.Option(20, help="Passes over the training pairs (paper: 20)."),
+    batch_size: int = typer.Option(32, help="Pairs per step (paper: 32)."),
+    lr: float = typer.Option(5e-4, help="Adam learning rate (paper: 5e-4)."),
+    l2: float = typer.Option(2.5e-3, help="λ of the weight penalty (paper: 2.5e-3)."),
+    device: str = typer.Option("auto", help="auto, cpu or cuda."),
+    seed: int = typer.Option(0, help="Seed of everything random."),
+    vectors: Optional[Path] = typer.Option(None, help="word2vec/GloVe/fastText file "
+                                           "[default: GloVe 6B-50d]."),
+    vocab_size: int = typer.Option(50_000, help="Words kept from the vectors."),
+    categorical: str = typer.Option("onehot", help="Categorical layers: onehot, embed, scalar."),
+    pool: int = typer.Option(2, help="Pool spatial layers p×p into cell shares (1 = off)."),
+    threads: Optional[int] = typer.Option(None, help="torch CPU threads [default: cores - 1]."),
+    amp: bool = typer.Option(False, help="bfloat16 autocast on CUDA."),
+    overwrite: bool = typer.Option(False, help="Reuse a non-empty run folder."),
+    progress: bool = typer.Option(True, help="Show the progress bar."),
+) -> None:
+    """Train the mutual-embedding model; keep the checkpoint of minimum validation loss."""
+    from sc2data.train import TrainConfig, train
+
+    run = train(TrainConfig(
+        data=str(data), out=str(out) if out else None, epochs=epochs, batch_size=batch_size,
+        lr=lr, l2=l2, device=device, seed=seed, vectors=str(vectors) if vectors else None,
+        vocab_size=vocab_size, categorical=categorical, pool=pool, threads=threads, amp=amp,
+        overwrite=overwrite, progress=progress))
+    typer.echo(f"run: {run}")
+
+
+@app.command("evaluate")
+def evaluate_cmd(
+    run: Path = typer.Argument(..., help="Run folder (sc2data train --out)."),
+    data: Optional[Path] = typer.Option(None, help="Pair-set folder [default: the run's]."),
+    device: str = typer.Option("auto", help="auto, cpu or cuda."),
+) -> None:
+    """Accuracy (beside the paper's), ROC-AUC, retrieval, paraphrases; writes RUN/eval.json."""
+    from sc2data.evaluate import evaluate, format_report
+
+    report = evaluate(run, data, device)
+    typer.echo(format_report(report))
+    typer.echo(f"wrote {Path(run) / 'eval.json'}")
+
+
+@app.command("tsne")
+def tsne_cmd(
+    run: Path = typer.Argument(..., help="Run folder (sc2data train --out)."),
+    data: Optional[Path] = typer.Option(None, help="Pair-set folder [default: the run's]."),
+    out: Optional[Path] = typer.Option(None, help="PNG path [default: RUN/tsne.png]."),
+    states: int = typer.Option(2000, help="Test states to plot (a random sample)."),
+    text: list[str] = typer.Option([], "--text", help="Extra command text to mark (repeatable)."),
+    seed: int = typer.Option(0, help="Seed of the sample and of t-SNE."),
+    device: str = typer.Option("auto", help="auto, cpu or cuda."),
+) -> None:
+    """A t-SNE map of state and command embeddings, like the paper's Fig. 3."""
+    from sc2data.evaluate import tsne
+
+    typer.echo(f"wrote {tsne(run, data, out, states, seed, text, device)}")
+
+
 def main(argv: list[str] | None = None) -> None:
     """Console entry point: user errors become one line on stderr and exit status 2."""
     command = typer.main.get_command(app)

@@ -213,8 +213,9 @@ def _check_node(expected: dict[str, str]) -> None:
 
 
 def _rollout_task(config: Any, out: str, i: int, env_factory: Any, agent_factory: Any,
-                  expected: dict[str, str], tracker: Any) -> dict[str, float]:
-    """One shard, written through ``write_shard`` into an attempt folder, then moved into place."""
+                  expected: dict[str, str], tracker: Any) -> dict[str, Any]:
+    """One shard, written through ``write_shard`` into an attempt folder, then moved into place;
+    returns its index rows (``write_shard``'s result) and the task's peak memory."""
     from sc2data import env as envs
     from sc2data.dataset import PARTIAL, shard_name
     from sc2data.rollout import write_shard
@@ -229,14 +230,16 @@ def _rollout_task(config: Any, out: str, i: int, env_factory: Any, agent_factory
         attempt = folder / f"{name}.{report.token}{PARTIAL}"
         attempt.mkdir()
         try:
-            write_shard(config=config, out=attempt, i=i, env_factory=env_factory,
-                        agent_factory=agent_factory, report=report)
+            rows[:] = write_shard(config=config, out=attempt, i=i, env_factory=env_factory,
+                                  agent_factory=agent_factory, report=report)
             os.replace(attempt / name, folder / name)
             fsync_path(folder)
         finally:
             shutil.rmtree(attempt, ignore_errors=True)
 
-    return _attempt(tracker, shard_name(i), work, children=config.env == "sc2")
+    rows: list[dict[str, Any]] = []
+    return {**_attempt(tracker, shard_name(i), work, children=config.env == "sc2"),
+            "rows": rows}
 
 
 def _label_task(data: str, selection: tuple[Any, Any, Any], unit_key: str, part: str,
@@ -313,6 +316,8 @@ def _tracker(ray: Any) -> Any:
 class ScaleoutReport:
     """What a Ray run did beyond the plain case: retries and their reasons, and task memory."""
 
+    results: dict[str, Any] = field(default_factory=dict, repr=False)
+    """Task key -> what the task returned (a rollout task: its shard's index rows)."""
     retried: dict[str, list[str]] = field(default_factory=dict)
     """Task key (shard name) -> one line per attempt, in order, for tasks with more than one."""
     tasks: int = 0
@@ -425,6 +430,7 @@ def drive(ray: Any, remote_fn: Any, tasks: list[_Task], options: RayOptions, bar
                 except ray.exceptions.RayError as e:  # Ray retried it as often as allowed
                     raise give_up(task, _system_failure(ray, e),
                                   task.seen + task.max_retries + 1) from None
+                report.results[task.key] = result.get("rows")
                 report.peak_rss_mb = max(report.peak_rss_mb, result["rss_mb"])
                 report.peak_children_rss_mb = max(report.peak_children_rss_mb,
                                                   result["children_rss_mb"])
@@ -467,12 +473,12 @@ class RayShards:
         self.report = ScaleoutReport()
 
     def __call__(self, config: Any, out: Path, todo: list[int], env_factory: Any,
-                 agent_factory: Any, bar: Any) -> None:
+                 agent_factory: Any, bar: Any) -> dict[int, list[dict[str, Any]]]:
         from sc2data.dataset import PARTIAL, shard_name
         from sc2data.provenance import versions
 
         if not todo:
-            return
+            return {}
         ray = require_ray()
         fn = ray.remote(num_cpus=1, memory=_memory(self.options, TASK_MEMORY_MB[config.env]),
                         retry_exceptions=list(transient_errors()))(_rollout_task)
@@ -483,6 +489,7 @@ class RayShards:
         finally:  # attempts of killed or cancelled tasks
             for stale in out.glob(f"shard-*{PARTIAL}"):
                 shutil.rmtree(stale, ignore_errors=True)
+        return {i: self.report.results[shard_name(i)] for i in todo}
 
 
 def rollout_on_ray(config: Any, out: str | os.PathLike[str], options: RayOptions,

@@ -5,7 +5,7 @@ set -euo pipefail
 OUT=${1:-demo-out}
 SC2DATA=${SC2DATA:-.venv/bin/sc2data}
 "$SC2DATA" build manifests/smoke.toml --out "$OUT/data"
-"$SC2DATA" train "$OUT/data" --out "$OUT/run" --epochs 5 --overwrite
+"$SC2DATA" train "$OUT/data/pairs" --out "$OUT/run" --epochs 5 --overwrite
 "$SC2DATA" evaluate "$OUT/run"
 "$SC2DATA" tsne "$OUT/run" --out "$OUT/tsne.png"
 echo "t-SNE picture: $OUT/tsne.png"

@@ -1,4 +1,5 @@
-"""``sc2data rollout | info | verify`` as a user runs them: exit codes, one-line errors, no debris."""
+"""``sc2data rollout | info | verify`` as a user runs them: exit codes, one-line errors, no
+debris left behind."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""collect_minerals on hand-built frames: an idle SCV back to work fires; deaths, idling don't."""
+"""collect_minerals on hand-built frames: an idle SCV back to work fires; deaths and idling don't."""
 
 from __future__ import annotations
 

@@ -6,12 +6,10 @@ stack, exactly as the real game's would. Per rule and step, the truth is:
 
 * build_scv — an SCV ``completed``;  train_marine — a Marine ``completed``;
 * build_supply_depot / build_barracks — a SupplyDepot / Barracks ``placed``;
-* collect_minerals — ``gathered`` (an idle SCV sent to mine). Two things a two-frame stack cannot
-  show limit it (see rules/collect_minerals.py): an idle SCV sent to *build* looks the same (the
-  building's cost is paid only when it arrives), and an SCV going idle in the step another leaves
-  idleness keeps the idle count level. So its ≥ 99% is held against what the stack can show —
-  precision against "an idle SCV was put to work", recall on steps where no SCV went idle — while
-  its agreement with ``gathered`` itself is printed and held to a floor.
+* collect_minerals — ``gathered`` (an idle SCV sent to mine). A two-frame stack cannot see a step
+  where one SCV goes idle (its building done) as another is sent to mine: the idle count stays
+  level. So its recall of ≥ 99% is held on the steps where no SCV went idle, and its raw recall is
+  printed and held to a floor (rules/collect_minerals.py).
 """
 
 from __future__ import annotations
@@ -25,14 +23,11 @@ import pytest
 from sc2data._pysc2 import units
 from sc2data.registry import load_registry
 from sc2data.rulebase import stack
+
 from sc2data.schema import Schema
 
-sim = pytest.importorskip("sc2data.sim")
-if not hasattr(sim, "BuildMarinesEnv"):
-    pytest.skip("the embedded simulator is not in this build", allow_module_level=True)
-
-from sc2data.agents import make_agent  # noqa: E402
-from sc2data.env import make_env  # noqa: E402
+from sc2data.agents import make_agent
+from sc2data.env import make_env
 
 T = units.Terran
 EPISODES = (("reduced-random", 0), ("reduced-random", 1), ("reduced-random", 2),
@@ -60,16 +55,13 @@ def rollout(agent_name: str, seed: int) -> Iterator[tuple[dict, dict, dict[str, 
         ts = env.step([agent.step(ts)])[0]
         cur = extract(ts.observation)
         seen = collections.Counter((e.kind, e.unit_type) for e in env.events)
-        died = {e.tag for e in env.events if e.kind == "died"}
         idle_after = {u.tag for u in env.game.idle_workers}
-        put_to_work = idle_before - idle_after - died
         yield prev, cur, {
             "build_scv": seen["completed", T.SCV] > 0,
             "train_marine": seen["completed", T.Marine] > 0,
             "build_supply_depot": seen["placed", T.SupplyDepot] > 0,
             "build_barracks": seen["placed", T.Barracks] > 0,
             "collect_minerals": seen["gathered", T.SCV] > 0,
-            "_put_to_work": bool(put_to_work),
             "_went_idle": bool(idle_after - idle_before),
         }
         prev = cur
@@ -85,7 +77,7 @@ def outcomes() -> dict[str, np.ndarray]:
         batch = stack([(p, c) for p, c, _ in steps])
         for rid, r in rules.items():
             fired[rid].append(r(batch))
-        for key in (*BUILTIN, "_put_to_work", "_went_idle"):
+        for key in (*BUILTIN, "_went_idle"):
             fired[f"truth:{key}"].append(np.array([t[key] for _, _, t in steps]))
     return {k: np.concatenate(v) for k, v in fired.items()}
 
@@ -103,9 +95,8 @@ def test_rule_agrees_with_the_simulator(outcomes: dict[str, np.ndarray], rule_id
     precision, recall = precision_recall(pred, truth)
     note = ""
     if rule_id == "collect_minerals":
-        assert precision >= 0.80 and recall >= 0.90  # floors against 'gathered' itself
-        note = f" (against 'gathered' alone: precision {precision:.4f}, recall {recall:.4f})"
-        precision, _ = precision_recall(pred, truth | outcomes["truth:_put_to_work"])
+        assert recall >= 0.97  # a floor for the raw recall against 'gathered'
+        note = f" (raw recall against 'gathered': {recall:.4f})"
         visible = ~outcomes["truth:_went_idle"]
         _, recall = precision_recall(pred[visible], truth[visible])
     print(f"{rule_id}: fired {pred.sum()} / {len(pred)} ({pred.mean():.3%}), events "

@@ -21,26 +21,23 @@ Faults, with a budget of ``retries`` extra attempts per task:
 Any other exception (a bug, a bad setting) fails the run at once, as a local run does. Past the
 budget, the run fails with one line naming the task; rerunning the same command resumes. A run
 ends with :class:`ScaleoutReport`: which tasks were retried, why, and each attempt's outcome.
+What runs inside the tasks is in :mod:`sc2data.raytasks`.
 """
 
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import re
-import resource
 import shutil
-import socket
-import time
-import uuid
 from collections import deque
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from sc2data.errors import MissingDependencyError, Sc2DataError
+from sc2data.raytasks import Tracker, describe, label_task, rollout_task
 
 DEFAULT_RETRIES = 2
 """Extra attempts per task after a worker death, a crashed instance or a hang."""
@@ -58,7 +55,6 @@ SUBREAPER = "RAY_kill_child_processes_on_worker_exit_with_raylet_subreaper"
 """Ray setting: the raylet kills what a dead worker started (its SC2 instance), within 10 s."""
 POLL_S = 0.5
 """How often the parent looks at the tasks (progress bar, hang check)."""
-_REPORT_EVERY_S = 0.5
 _ADDRESS = re.compile(r"local|auto|ray://\S+|[\w.\-]+:\d+")
 
 
@@ -150,149 +146,6 @@ def connect(options: RayOptions) -> Iterator[Any]:
         ray.shutdown()
 
 
-# -- inside a task --------------------------------------------------------------------------------
-
-class _Reporter:
-    """Steps or stacks done, sent to the tracker at most every half second (plus at the end)."""
-
-    def __init__(self, tracker: Any, key: str, token: str) -> None:
-        self.tracker, self.key, self.token = tracker, key, token
-        self.pending, self.sent = 0, time.monotonic()
-
-    def __call__(self, n: int) -> None:
-        self.pending += n
-        if time.monotonic() - self.sent >= _REPORT_EVERY_S:
-            self.flush()
-
-    def flush(self) -> None:
-        self.tracker.add.remote(self.key, self.token, self.pending)
-        self.pending, self.sent = 0, time.monotonic()
-
-
-def _describe(e: BaseException) -> str:
-    return str(e) if isinstance(e, Sc2DataError) else f"{type(e).__name__}: {e}"
-
-
-def _peak_rss(children: bool) -> dict[str, float]:
-    """Peak resident memory (MB) of this worker and, for SC2, of its largest finished child (the
-    game; short-lived forks of the worker at import time also count there, hence SC2 only)."""
-    own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    kids = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024 if children else 0.0
-    return {"rss_mb": own, "children_rss_mb": kids}
-
-
-def _attempt(tracker: Any, key: str, work: Callable[[_Reporter], None],
-             children: bool = False) -> dict[str, float]:
-    """Run ``work`` as one attempt of task ``key``: registered with the tracker, its progress
-    reported, and its failure's reason recorded before the exception goes back to Ray."""
-    import ray
-
-    token = uuid.uuid4().hex[:12]
-    # Waited for: a message still in flight when the worker is killed would be lost.
-    ray.get(tracker.start.remote(key, token, f"pid {os.getpid()} on {socket.gethostname()}"))
-    report = _Reporter(tracker, key, token)
-    try:
-        work(report)
-    except BaseException as e:
-        tracker.fail.remote(key, token, _describe(e))
-        raise
-    finally:
-        report.flush()
-    return _peak_rss(children)
-
-
-def _check_node(expected: dict[str, str]) -> None:
-    from sc2data.provenance import versions
-
-    here = versions()
-    if here != expected:
-        diff = ", ".join(f"{k} {here.get(k)} (driver: {v})" for k, v in expected.items()
-                         if here.get(k) != v)
-        raise Sc2DataError(f"node {socket.gethostname()} has {diff}; install the same versions "
-                           f"on every node")
-
-
-def _rollout_task(config: Any, out: str, i: int, env_factory: Any, agent_factory: Any,
-                  expected: dict[str, str], tracker: Any) -> dict[str, Any]:
-    """One shard, written through ``write_shard`` into an attempt folder, then moved into place;
-    returns its index rows (``write_shard``'s result) and the task's peak memory."""
-    from sc2data import env as envs
-    from sc2data.dataset import PARTIAL, shard_name
-    from sc2data.rollout import write_shard
-    from sc2data.storage import fsync_path
-
-    def work(report: _Reporter) -> None:
-        _check_node(expected)
-        if config.env == "sc2" and not envs.sc2_available():
-            raise Sc2DataError(f"node {socket.gethostname()} has no StarCraft II under "
-                               f"{envs.sc2_path()}; install it and set SC2PATH on every node")
-        folder, name = Path(out), shard_name(i)
-        attempt = folder / f"{name}.{report.token}{PARTIAL}"
-        attempt.mkdir()
-        try:
-            rows[:] = write_shard(config=config, out=attempt, i=i, env_factory=env_factory,
-                                  agent_factory=agent_factory, report=report)
-            os.replace(attempt / name, folder / name)
-            fsync_path(folder)
-        finally:
-            shutil.rmtree(attempt, ignore_errors=True)
-
-    rows: list[dict[str, Any]] = []
-    return {**_attempt(tracker, shard_name(i), work, children=config.env == "sc2"),
-            "rows": rows}
-
-
-def _label_task(data: str, selection: tuple[Any, Any, Any], unit_key: str, part: str,
-                keys: Sequence[str], batch_size: int, tracker: Any) -> dict[str, float]:
-    """One label unit, checked to use the driver's rules on the driver's data."""
-    from sc2data.label import dataset_source, fingerprint, write_part
-    from sc2data.registry import load_registry
-
-    def work(report: _Reporter) -> None:
-        include, exclude, rules_dir = selection
-        rules = load_registry(rules_dir).select(include, exclude)
-        source = dataset_source(data)
-        state = json.loads((Path(part).parent / "state.json").read_text())
-        if fingerprint(rules, source.info) != state.get("fingerprint"):
-            raise Sc2DataError(f"node {socket.gethostname()} sees other rules or other data "
-                               f"than the driver; install the same sc2data and rule plugins "
-                               f"on every node and share the dataset folder")
-        unit = next(u for u in source.units if u.key == unit_key)
-        write_part(unit, rules, keys, batch_size, Path(part), on_batch=report)
-
-    return _attempt(tracker, unit_key.split(":")[0], work)
-
-
-class _Tracker:
-    """A Ray actor: each task's attempts — where they run, what they did, when last heard of."""
-
-    def __init__(self) -> None:
-        self.attempts: dict[str, list[dict[str, Any]]] = {}
-
-    def reset(self) -> None:
-        self.attempts = {}
-
-    def start(self, key: str, token: str, where: str) -> None:
-        self.attempts.setdefault(key, []).append(
-            {"token": token, "where": where, "done": 0, "news": time.monotonic(), "error": None})
-
-    def _find(self, key: str, token: str) -> dict[str, Any] | None:
-        return next((a for a in self.attempts.get(key, ()) if a["token"] == token), None)
-
-    def add(self, key: str, token: str, n: int) -> None:
-        if (a := self._find(key, token)) is not None:
-            a["done"] += n
-            a["news"] = time.monotonic()
-
-    def fail(self, key: str, token: str, reason: str) -> None:
-        if (a := self._find(key, token)) is not None:
-            a["error"] = reason
-
-    def poll(self) -> dict[str, list[dict[str, Any]]]:
-        now = time.monotonic()
-        return {k: [{**a, "idle": now - a["news"]} for a in v] for k, v in self.attempts.items()}
-
-
 _TRACKER: list[Any] = []
 """``[(node id, job id), handle]`` of this driver's tracker. Kept between runs, because starting
 an actor's process takes seconds, and held here, because Ray ends an actor with its last handle."""
@@ -306,7 +159,7 @@ def _tracker(ray: Any) -> Any:
         with contextlib.suppress(ray.exceptions.RayActorError):
             ray.get(_TRACKER[1].reset.remote())
             return _TRACKER[1]
-    _TRACKER[:] = [key, ray.remote(num_cpus=0)(_Tracker).remote()]
+    _TRACKER[:] = [key, ray.remote(num_cpus=0)(Tracker).remote()]
     return _TRACKER[1]
 
 
@@ -424,8 +277,8 @@ def drive(ray: Any, remote_fn: Any, tasks: list[_Task], options: RayOptions, bar
                     cause = e.cause if e.cause is not None else e
                     if not isinstance(cause, transient_errors()):
                         raise Sc2DataError(f"{what} of {task.key} failed: "
-                                           f"{_describe(cause)}") from None
-                    raise give_up(task, f"the instance crashed: {_describe(cause)}",
+                                           f"{describe(cause)}") from None
+                    raise give_up(task, f"the instance crashed: {describe(cause)}",
                                   task.seen + task.max_retries + 1) from None
                 except ray.exceptions.RayError as e:  # Ray retried it as often as allowed
                     raise give_up(task, _system_failure(ray, e),
@@ -481,7 +334,7 @@ class RayShards:
             return {}
         ray = require_ray()
         fn = ray.remote(num_cpus=1, memory=_memory(self.options, TASK_MEMORY_MB[config.env]),
-                        retry_exceptions=list(transient_errors()))(_rollout_task)
+                        retry_exceptions=list(transient_errors()))(rollout_task)
         tasks = [_Task(shard_name(i), (config, str(out), i, env_factory, agent_factory,
                                        versions())) for i in todo]
         try:
@@ -524,7 +377,7 @@ class RayUnits:
             return
         ray = require_ray()
         fn = ray.remote(num_cpus=1, memory=_memory(self.options, LABEL_MEMORY_MB),
-                        retry_exceptions=list(transient_errors()))(_label_task)
+                        retry_exceptions=list(transient_errors()))(label_task)
         tasks = [_Task(unit.key.split(":")[0], (str(self.data), self.selection, unit.key,
                                                 str(part), tuple(keys), batch_size))
                  for unit, part in todo]

@@ -351,12 +351,18 @@ def rollout_on_ray(config: Any, out: str | os.PathLike[str], options: RayOptions
     """``sc2data rollout --ray``: :func:`sc2data.rollout.rollout` with shards as Ray tasks.
 
     Checks the settings and the folder before it starts or joins Ray; resumable as locally.
+    Joining a cluster, the driver's machine needs no StarCraft II: each task checks its node.
     """
-    from sc2data.rollout import check_folder, rollout
+    from sc2data import env as envs
+    from sc2data.rollout import check_folder, default_env_factory, rollout
 
     config.validate()
     options.validate()
     check_folder(config, Path(out))
+    if env_factory is None and options.address is not None:
+        env_factory = default_env_factory(config)  # skips rollout()'s check of this machine
+    elif env_factory is None and config.env == "sc2" and not envs.sc2_available():
+        envs.make_env("sc2")  # the install hint, before a local instance starts for nothing
     runner = RayShards(options)
     with connect(options):
         summary = rollout(config, out, progress=progress, env_factory=env_factory,

@@ -247,6 +247,23 @@ def test_the_cli_joins_a_running_cluster(ray_instance: Any, reference: Path,
     assert_same_data(out, reference)
 
 
+@pytest.mark.slow
+def test_a_node_without_the_game_fails_the_run_at_once(ray_instance: Any, tmp_path: Path) -> None:
+    """Joining a cluster, the driver's machine needs no SC2, but a node that lacks it stops the
+    run at once with a line naming the node (no retry can fix that)."""
+    from sc2data.env import sc2_available
+
+    if sc2_available():
+        pytest.skip("StarCraft II is installed here")
+    out = tmp_path / "data"
+    with pytest.raises(Sc2DataError, match=r"^rollout of shard-00000\.h5 failed: node \S+ has "
+                                           r"no StarCraft II under .*; install it and set SC2PATH "
+                                           r"on every node$"):
+        rollout_on_ray(RolloutConfig(env="sc2", episodes=1), out, RayOptions(address="auto"),
+                       progress=False)
+    assert not list(out.glob("*.partial")) and not (out / INDEX).exists()
+
+
 def test_without_ray_the_option_says_how_to_install_it(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture[str]) -> None:

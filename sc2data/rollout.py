@@ -37,6 +37,12 @@ EnvFactory = Callable[[int], Any]
 """``seed -> environment.Base`` (a pysc2 environment) for one episode."""
 AgentFactory = Callable[[int], Any]
 """``seed -> pysc2 BaseAgent`` for one episode."""
+ShardRunner = Callable[["RolloutConfig", Path, list[int], EnvFactory, AgentFactory, Any],
+                      dict[int, list[dict[str, Any]]]]
+"""Writes the shards ``todo`` elsewhere than in local worker processes (Ray tasks:
+``sc2data.scaleout.RayShards``): ``runner(config, out, todo, env_factory, agent_factory, bar)``,
+each shard through :func:`write_shard`, feeding the progress ``bar``; returns what
+:func:`write_shard` returned, by shard."""
 LAYER_SETS: tuple[str, ...] = ("paper", "full")
 
 
@@ -263,7 +269,10 @@ def prepare_folder(config: RolloutConfig, out: Path) -> list[int]:
     if not (out / MANIFEST).exists():
         write_manifest(out, manifest_for(config))
     for stale in out.glob(f"*{PARTIAL}"):
-        stale.unlink()
+        if stale.is_dir():  # an attempt folder of a Ray task (sc2data.scaleout)
+            shutil.rmtree(stale)
+        else:
+            stale.unlink()
     todo = []
     for i in range(config.n_shards):
         path = out / shard_name(i)
@@ -314,11 +323,13 @@ class RolloutSummary:
 
 def rollout(config: RolloutConfig, out: str | os.PathLike[str], workers: int = 1,
             progress: bool | None = None, env_factory: EnvFactory | None = None,
-            agent_factory: AgentFactory | None = None) -> RolloutSummary:
+            agent_factory: AgentFactory | None = None,
+            runner: ShardRunner | None = None) -> RolloutSummary:
     """Roll out ``config`` into folder ``out`` with ``workers`` processes; resumable.
 
     ``env_factory``/``agent_factory`` replace the defaults (``make_env(config.env, seed=…)``,
     ``make_agent(config.agent, seed=…)``); they must be picklable for ``workers > 1``.
+    ``runner`` writes the shards instead of local processes (``sc2data.scaleout``).
     """
     out = Path(out)
     config.validate()
@@ -350,7 +361,9 @@ def rollout(config: RolloutConfig, out: str | os.PathLike[str], workers: int = 1
         total = sum(len(config.shard_episodes(i)) for i in todo) * per_episode
         with _progress(total, progress) as bar:
             job = functools.partial(write_shard, config, out, env_factory, agent_factory)
-            if workers == 1 or len(todo) <= 1:
+            if runner is not None:
+                written = runner(config, out, todo, env_factory, agent_factory, bar)
+            elif workers == 1 or len(todo) <= 1:
                 written = {i: job(i, bar.update) for i in todo}
             else:
                 written = run_parallel(job, todo, workers, out, bar.update, shard_name)

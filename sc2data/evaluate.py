@@ -124,7 +124,7 @@ def _pairset(scorer: MEMScorer, data: str | os.PathLike[str] | None) -> PairSet:
         data = scorer.meta.get("config", {}).get("data")
         if data is None:
             raise Sc2DataError("the run does not record its data folder; pass --data DATA")
-    pairset = PairSet(data)
+    pairset = PairSet(Path(data))
     if pairset.schema != scorer.schema:
         raise Sc2DataError(f"{pairset.path} has another state schema than the model; evaluate "
                            f"on data built with the model's layers")
@@ -187,8 +187,9 @@ def format_report(report: dict[str, Any]) -> str:
             for k, v in test["per_kind"].items()))
         lines.append("test per command: " + "  ".join(
             f"{k} {pct(v['accuracy']).strip()}%" for k, v in test["per_command"].items()))
+        retrieval = test["retrieval"]["per_class"]
         lines.append("test retrieval:   " + "  ".join(
-            f"{k} {pct(v['accuracy']).strip()}%" for k, v in test["retrieval"]["per_class"].items()))
+            f"{k} {pct(v['accuracy']).strip()}%" for k, v in retrieval.items()))
         p = test.get("paraphrases")
         if p and p["per_paraphrase"]:
             lines.append(f"test paraphrases: accuracy {pct(p['accuracy']).strip()}%, nearest to "
@@ -233,10 +234,11 @@ def tsne(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None
     fig, ax = plt.subplots(figsize=(11, 9))
     colours = {cid: plt.get_cmap("tab10")(k) for k, cid in enumerate(ids)}
     null = labels == ""
-    ax.scatter(*s_xy[null].T, s=6, c="lightgrey", label=f"null ({int(null.sum())})")
+    ax.scatter(s_xy[null, 0], s_xy[null, 1], s=6, c="lightgrey",
+               label=f"null ({int(null.sum())})")
     for cid in ids:
         m = labels == cid
-        ax.scatter(*s_xy[m].T, s=8, color=colours[cid], alpha=0.7,
+        ax.scatter(s_xy[m, 0], s_xy[m, 1], s=8, color=colours[cid], alpha=0.7,
                    label=f"{canon[cid]} ({int(m.sum())})")
     style = {"canonical": ("*", 420), "paraphrase": ("D", 90), "extra": ("X", 160)}
     notes = []
@@ -274,11 +276,13 @@ def _declutter(fig: Any, notes: list[Any]) -> None:
 
     fig.canvas.draw()
     renderer = fig.canvas.get_renderer()
-    frame = notes[0].axes.get_window_extent(renderer) if notes else None
+    if not notes:
+        return
+    frame = notes[0].axes.get_window_extent(renderer)
     steps = [0] + [d * k for k in range(1, 16) for d in (-1, 1)]
     placed: list[Any] = []
 
-    def put(side: str, dy: float) -> Any:
+    def put(note: Any, side: str, dy: float) -> Any:
         note.set_position((10, dy) if side == "right" else (-10, dy))
         note.set_horizontalalignment("left" if side == "right" else "right")
         return Text.get_window_extent(note, renderer)  # the text alone, not its arrow
@@ -286,7 +290,7 @@ def _declutter(fig: Any, notes: list[Any]) -> None:
     for note in notes:
         best = None  # (overlaps, side, dy) of the least crowded spot inside the axes
         for side, dy in [(side, 6 + 10 * k) for k in steps for side in ("right", "left")]:
-            box = put(side, dy)
+            box = put(note, side, dy)
             if not (box.x0 >= frame.x0 and box.x1 <= frame.x1 and box.y0 >= frame.y0
                     and box.y1 <= frame.y1):
                 continue
@@ -295,7 +299,7 @@ def _declutter(fig: Any, notes: list[Any]) -> None:
                 best = (crowd, side, dy)
             if crowd == 0:
                 break
-        placed.append(put(best[1], best[2]) if best else put("right", 6))
+        placed.append(put(note, best[1], best[2]) if best else put(note, "right", 6))
 
 
 def _tsne(x: np.ndarray, seed: int) -> np.ndarray:

@@ -80,6 +80,11 @@ class ModelConfig:
     """Width of the mutual embedding."""
 
 
+def conv_for(pool: int) -> tuple[tuple[int, int, int], ...]:
+    """The two conv layers for a pool size: 15×15 then 7×7 (pooled) or 6×6 (full) maps at 64×64."""
+    return ((16, 4, 2), (32, 3, 2)) if pool > 1 else ((16, 8, 4), (32, 4, 2))
+
+
 def value_tables(schema: Schema, batches: Iterable[StackBatch], max_table: int
                  ) -> dict[str, list[int]]:
     """Per categorical layer, the ids the model distinguishes (scanning ``batches`` if needed)."""
@@ -111,6 +116,12 @@ class SpatialInput(nn.Module):
     the same image; see :class:`EmbeddedConv`).
     """
 
+    lut: torch.Tensor
+    raw_offsets: torch.Tensor
+    first: torch.Tensor
+    inv_n: torch.Tensor
+    inv_scale: torch.Tensor
+
     def __init__(self, layers: tuple, tables: Mapping[str, list[int]], cfg: ModelConfig) -> None:
         super().__init__()
         self.mode, self.pool = cfg.categorical, cfg.pool
@@ -119,11 +130,14 @@ class SpatialInput(nn.Module):
             [1.0 / l.scale for l in layers if not l.categorical]))
         cats = [l for l in layers if l.categorical]
         self.cat_keys = [l.key for l in cats]
-        lut, raw_offsets, sizes, first = [], [], [], []
+        lut: list[np.ndarray] = []
+        raw_offsets: list[int] = []
+        sizes: list[int] = []
+        first: list[int] = []
         for l in cats:
             values = list(tables[l.key])
             full = values == list(range(l.scale))
-            n = len(values) + (not full)  # compact index 0 is "other" unless every id is kept
+            n = len(values) + int(not full)  # compact index 0 is "other" unless every id is kept
             compact = np.zeros(l.scale, np.int64)
             compact[np.array(values, np.int64)] = np.arange(len(values)) + (not full)
             raw_offsets.append(sum(len(x) for x in lut))
@@ -249,6 +263,7 @@ class StateEncoder(nn.Module):
     def __init__(self, schema: Schema, tables: Mapping[str, list[int]], cfg: ModelConfig) -> None:
         super().__init__()
         self.inputs = nn.ModuleDict()
+        self.groups: list[tuple[str, SpatialInput]] = []  # the same modules, typed, in order
         self.towers = nn.ModuleDict()
         width = 0
         for group in ("screen", "minimap"):
@@ -270,6 +285,7 @@ class StateEncoder(nn.Module):
             with torch.no_grad():
                 width += tower(torch.zeros(1, inp.channels, size, size)).shape[1]
             self.inputs[group], self.towers[group] = inp, tower
+            self.groups.append((group, inp))
         names = {v.name: v for v in schema.vectors}
         missing = [n for n in cfg.nonspatial if n not in names]
         if missing:
@@ -282,8 +298,8 @@ class StateEncoder(nn.Module):
         self.head = nn.Linear(width, cfg.dim)
 
     def forward(self, x: Mapping[str, torch.Tensor]) -> torch.Tensor:
-        feats = [self.towers[g](self.inputs[g](x.get(f"{g}.idx"), x.get(f"{g}.scalar")))
-                 for g in self.inputs]
+        feats = [self.towers[g](inp(x.get(f"{g}.idx"), x.get(f"{g}.scalar")))
+                 for g, inp in self.groups]
         if self.nonspatial is not None:  # both frames and their change, sign(x)·log1p(|x|)
             v = x["vectors"]
             v = torch.cat([v[:, 0], v[:, 1], v[:, 1] - v[:, 0]], -1)
@@ -292,7 +308,7 @@ class StateEncoder(nn.Module):
 
     def keys(self) -> list[str]:
         """The schema keys this encoder reads."""
-        return [k for g in self.inputs.values() for k in g.scalar_keys + g.cat_keys] + self.vectors
+        return [k for _, g in self.groups for k in g.scalar_keys + g.cat_keys] + self.vectors
 
     def pack(self, arrays: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
         """Stacks by schema key (``(B, 2, …)``) → this encoder's inputs, in numpy on the CPU.
@@ -301,7 +317,7 @@ class StateEncoder(nn.Module):
         non-spatial vectors are concatenated, float32 ``(B, 2, F)``.
         """
         out: dict[str, np.ndarray] = {}
-        for g, inp in self.inputs.items():
+        for g, inp in self.groups:
             out.update({f"{g}.{k}": a for k, a in inp.pack(arrays).items()})
         if self.vectors:
             out["vectors"] = np.concatenate([arrays[n] for n in self.vectors], -1).astype(
@@ -309,9 +325,9 @@ class StateEncoder(nn.Module):
         return out
 
     def pack_torch(self, arrays: Mapping[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-        """:meth:`pack` for raw stack tensors already on a GPU (see :func:`raw_tensors`)."""
+        """:meth:`pack` for raw stack tensors already on a GPU (see :func:`model_inputs`)."""
         out: dict[str, torch.Tensor] = {}
-        for g, inp in self.inputs.items():
+        for g, inp in self.groups:
             out.update({f"{g}.{k}": a for k, a in inp.pack_torch(arrays).items()})
         if self.vectors:
             out["vectors"] = torch.cat([arrays[n] for n in self.vectors], -1).float()
@@ -440,5 +456,5 @@ def resolve_device(name: str) -> torch.device:
     return torch.device(name)
 
 
-__all__ = ["MEM", "ModelConfig", "distance", "load_checkpoint", "save_checkpoint",
+__all__ = ["MEM", "ModelConfig", "conv_for", "distance", "load_checkpoint", "save_checkpoint",
            "model_inputs", "resolve_device", "to_device", "to_tensors", "value_tables"]

@@ -1,4 +1,4 @@
-"""A trained mutual-embedding model as a scorer: ``sc2data.load_model(RUN).distance(stacks, texts)``.
+"""A trained MEM as a scorer: ``sc2data.load_model(RUN).distance(stacks, texts)``.
 
 The object a reinforcement-learning loop calls every step (brief §1: narration as a dense shaping
 reward): batched, on CPU or GPU, with command embeddings cached (a narration repeats the same few
@@ -49,7 +49,7 @@ class MEMScorer:
         missing = [k for k in self._keys if k not in arrays]
         if missing:
             raise Sc2DataError(f"the stacks lack {missing[0]!r}, which the model was trained on "
-                               f"(it reads {len(self._keys)} keys of schema v{self.schema.version})")
+                               f"(it reads {len(self._keys)} keys, schema v{self.schema.version})")
         for l in self.schema.layers:
             size = self.schema.size(l.group)
             shape = np.shape(arrays[l.key])[1:] if l.key in self._keys else (2, size, size)

@@ -116,17 +116,16 @@ def _stack(rng: np.random.Generator, event: str | None) -> tuple[_Frame, _Frame]
         100 if u == _T.SupplyDepot else 150 for u, *_ in placed)
 
     frames = []
-    for t in (0, 1):
+    for _ in (0, 1):
         f = _Frame(_empty(64), _empty(64), player.copy(), score.copy())
-        for plane, size in (("screen", 64), ("minimap", 64)):
+        for plane in ("screen", "minimap"):
             a = getattr(f, plane)
             rows = slice(0, 48) if plane == "screen" else slice(27, 45)
             cols = slice(0, 64) if plane == "screen" else slice(20, 46)
             a["height_map"][rows, cols] = 160
             a["visibility_map"][rows, cols] = 2
         f.minimap["camera"][27:51, 21:45] = 1
-        for i, (mx, my) in enumerate([(5, 10), (8, 14), (5, 19), (8, 24), (5, 29), (8, 34),
-                                      (5, 39), (8, 44)]):
+        for mx, my in ((5, 10), (8, 14), (5, 19), (8, 24), (5, 29), (8, 34), (5, 39), (8, 44)):
             _stamp(f, units.Neutral.MineralField, my, mx, 6)
         _stamp(f, _T.CommandCenter, 17, 16, 15)
         for unit, y, x, size in placed:
@@ -174,9 +173,9 @@ def stacks(schema: Schema, events: list[str | None], seed: int) -> StackBatch:
             out[l.key].append(np.stack([p if p is not None else np.zeros((64, 64), np.int32)
                                         for p in planes]).astype(l.dtype))
         for v in schema.vectors:
-            vec = {"player": lambda f: f.player, "score_cumulative": lambda f: f.score}.get(
-                v.name, lambda f: np.zeros(v.size, np.int32))
-            out[v.name].append(np.stack([vec(f) for f in pair]).astype(v.dtype))
+            vecs = [f.player if v.name == "player" else f.score if v.name == "score_cumulative"
+                    else np.zeros(v.size, np.int32) for f in pair]
+            out[v.name].append(np.stack(vecs).astype(v.dtype))
     return StackBatch({k: np.stack(a) for k, a in out.items()}, schema)
 
 
@@ -222,7 +221,8 @@ def write_pairset(out: str | Path, states_per_command: int = 40, null_states: in
         counts[split] = {"pairs": n_pairs, "states": len(members)}
     table = pa.table({
         "split": pa.array(rows["split"], pa.string()), "state": pa.array(rows["state"], pa.int64()),
-        "episode": pa.array(rows["episode"], pa.int64()), "step": pa.array(rows["step"], pa.int32()),
+        "episode": pa.array(rows["episode"], pa.int64()),
+        "step": pa.array(rows["step"], pa.int32()),
         "command_id": pa.array(rows["command_id"], pa.string()),
         "command": pa.array(rows["command"], pa.string()),
         "target": pa.array(rows["target"], pa.float32()),

@@ -106,6 +106,8 @@ def train(cfg: TrainConfig) -> Path:
     words = load_word_vectors(cfg.vectors, cfg.vocab_size,
                               extra_words=list(data.texts().values()) + paraphrases)
     splits = {s: data.pairs(s) for s in ("train", "val")}
+    if len(splits["train"]) == 0:
+        raise Sc2DataError(f"{data.path} has no training pairs; rebuild it with more states")
     texts = sorted({str(t) for p in splits.values() for t in p.command})
     ids, lengths = words.encode(texts)
     text_of = {t: i for i, t in enumerate(texts)}
@@ -115,7 +117,7 @@ def train(cfg: TrainConfig) -> Path:
     train_split, val_split = data.packed("train"), data.packed("val")
     run = _prepare_run(Path(cfg.out or Path("runs") / cfg.name), cfg.overwrite)
     mcfg = M.ModelConfig(categorical=cfg.categorical, pool=cfg.pool,  # type: ignore[arg-type]
-                         conv=((16, 4, 2), (32, 3, 2)) if cfg.pool > 1 else ((16, 8, 4), (32, 4, 2)))
+                         conv=M.conv_for(cfg.pool))
     big = [l.key for l in data.schema.layers if l.categorical and l.scale > mcfg.max_table]
     tables = M.value_tables(data.schema, (b for _, b in train_split.blocks(keys=big)) if big
                             else [], mcfg.max_table)
@@ -135,8 +137,6 @@ def train(cfg: TrainConfig) -> Path:
 
     train_loader = loader("train", train_split, True)
     val_loader = loader("val", val_split, False)
-    if len(splits["train"]) == 0:
-        raise Sc2DataError(f"{data.path} has no training pairs")
 
     config = {**asdict(cfg), "model": asdict(mcfg), "run": str(run),
               "data_fingerprint": data.fingerprint, "recipe_name": data.recipe_name,

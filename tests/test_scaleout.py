@@ -20,27 +20,17 @@ import pyarrow.parquet as pq
 import pytest
 
 import sc2data
-from sc2data.cli import main
 from sc2data.dataset import INDEX
 from sc2data.errors import Sc2DataError
 from sc2data.label import STACKS_FILE, label_dataset
 from sc2data.rollout import RolloutConfig, _make_agent, episode_seeds, rollout
 from sc2data.scaleout import RayOptions, label_on_ray, rollout_on_ray
+from tests.cli import assert_one_line_error, run_cli
 
 CONFIG = RolloutConfig(env="sim", agent="reduced-random", episodes=4, episodes_per_shard=1,
                        max_steps=40, seed=5)
 """The real simulator and agent; short episodes, one per shard."""
 AGENT = functools.partial(_make_agent, CONFIG.agent)
-
-
-def cli(args: list[Any], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
-    try:
-        main([str(a) for a in args])
-        code = 0
-    except SystemExit as e:
-        code = int(e.code or 0)
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 @pytest.fixture(scope="module")
@@ -148,7 +138,7 @@ def test_a_worker_killed_mid_episode_is_retried_and_the_data_equals_a_local_run(
     first, second = report.retried["shard-00002.h5"]
     assert "worker process died" in first and second.endswith(": done")
     assert report.lines()[0].startswith("ray: 4 tasks, 1 retried; peak RSS per task ")
-    assert cli(["verify", out], capsys)[0] == 0
+    assert run_cli(["verify", out], capsys)[0] == 0
     assert_same_data(out, reference)
 
 
@@ -221,7 +211,7 @@ def test_label_on_ray_equals_a_local_label(ray_instance: Any, reference: Path, t
     label_dataset(local, progress=False)
     summary, report = label_on_ray(remote, RayOptions(), progress=False)
     assert summary.stacks == 160 and report.tasks == 4 and not report.retried
-    code, out, err = cli(["label", "--ray", cli_run, "--no-progress"], capsys)  # bare --ray
+    code, out, err = run_cli(["label", "--ray", cli_run, "--no-progress"], capsys)  # bare
     assert code == 0, err
     assert "ray: 4 tasks, none retried" in out
     want = pq.read_table(local / STACKS_FILE).replace_schema_metadata(None)
@@ -270,10 +260,9 @@ def test_without_ray_the_option_says_how_to_install_it(
     monkeypatch.setitem(sys.modules, "ray", None)  # `import ray` now fails, as when absent
     for args in (["rollout", "--out", tmp_path / "out", "--ray"],
                  ["label", tmp_path / "out", "--ray", "auto"]):
-        code, _, err = cli(args, capsys)
-        assert code == 2 and err.count("\n") == 1, err
-        assert err.startswith("sc2data: error: --ray needs the optional package 'ray'; install "
-                              "it with pip install 'sc2data[ray]'")
+        code, _, err = run_cli(args, capsys)
+        assert_one_line_error(code, err, "sc2data: error: --ray needs the optional package "
+                              "'ray'; install it with pip install 'sc2data[ray]'")
     assert not (tmp_path / "out").exists()
 
 
@@ -286,6 +275,6 @@ def test_without_ray_the_option_says_how_to_install_it(
 def test_bad_ray_options_fail_in_one_line(args: list[str], match: str, tmp_path: Path,
                                           capsys: pytest.CaptureFixture[str]) -> None:
     pytest.importorskip("ray")
-    code, _, err = cli(["rollout", "--out", tmp_path / "out", *args], capsys)
-    assert code == 2 and err.startswith(f"sc2data: error: {match}"), err
-    assert err.count("\n") == 1 and not (tmp_path / "out").exists()
+    code, _, err = run_cli(["rollout", "--out", tmp_path / "out", *args], capsys)
+    assert_one_line_error(code, err, f"sc2data: error: {match}")
+    assert not (tmp_path / "out").exists()

@@ -246,7 +246,6 @@ def test_bad_batch_size(tmp_path: Path) -> None:
 @pytest.fixture(scope="module")
 def rolled_out(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A small simulator dataset (3 episodes × 150 steps, 2 shards), made as a user makes one."""
-    pytest.importorskip("sc2data.rollout", reason="dataset storage is not in this build")
     out = tmp_path_factory.mktemp("rollout") / "data"
     assert exit_code("rollout", "--out", str(out), "--episodes", "3", "--max-steps", "150",
                    "--episodes-per-shard", "2", "--seed", "3", "--no-progress") == 0
@@ -294,7 +293,6 @@ def test_cli_label_selects_rules(data: Path, capsys: pytest.CaptureFixture[str])
 
 def test_cli_label_refuses_a_folder_that_is_not_a_dataset(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    pytest.importorskip("sc2data.rollout", reason="dataset storage is not in this build")
     assert exit_code("label", str(tmp_path), "--no-progress") == 2
     assert "is not an sc2data dataset" in one_line_error(capsys)
     assert list(tmp_path.iterdir()) == []

@@ -41,7 +41,8 @@ TARGET_EVENTS = 10_000
 
 def cpu_seconds() -> float:
     """CPU time of this process and of its finished children (the workers)."""
-    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
     return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
@@ -110,14 +111,17 @@ def main() -> None:
     print(f"# {platform.node()}: {os.cpu_count()} cores (shared), Python "
           f"{platform.python_version()}; {args.episodes} episodes × {EPISODE_STEPS} steps, "
           f"{args.agent}, paper layers; medians of {args.repeats}\n")
-    runs: dict[str, list[float]] = {"play": [], "k1": [], "k2": [], "cpu_k1": [], "cpu_k2": []}
+    runs: dict[str, list[float]] = {k: [] for k in ("play", "k1", "k2", "cpu_play", "cpu_k1",
+                                                     "cpu_k2")}
     events: dict[str, list[int]] = {}
     reads: list[dict[str, float]] = []
     size = frames = 0
     with tempfile.TemporaryDirectory() as tmp:
         for _ in range(args.repeats):
+            c = cpu_seconds()
             seconds, steps, events = play_only(config)
             runs["play"].append(steps / seconds)
+            runs["cpu_play"].append(steps / (cpu_seconds() - c))
             for k in (1, 2):
                 out = Path(tmp) / f"k{k}"
                 shutil.rmtree(out, ignore_errors=True)
@@ -131,11 +135,13 @@ def main() -> None:
     med = {k: statistics.median(v) for k, v in runs.items()}
     print("| rollout (sim + agent + write) | steps/s, wall | steps/s per CPU-second |")
     print("|---|---:|---:|")
-    print(f"| sim + agent only, no storage, 1 process | {med['play']:,.0f} | |")
+    print(f"| sim + agent only, no storage, 1 process | {med['play']:,.0f} | "
+          f"{med['cpu_play']:,.0f} |")
     print(f"| 1 worker | {med['k1']:,.0f} | {med['cpu_k1']:,.0f} |")
     print(f"| 2 workers | {med['k2']:,.0f} | {med['cpu_k2']:,.0f} |")
     print(f"\nstorage overhead: 1 worker runs at {med['k1'] / med['play']:.0%} of sim+agent "
-          f"alone; 2 workers at {med['k2'] / med['k1']:.2f}x 1 worker")
+          f"alone (wall), {med['cpu_k1'] / med['cpu_play']:.0%} per CPU-second; 2 workers at "
+          f"{med['k2'] / med['k1']:.2f}x 1 worker (wall)")
     print(f"bytes per frame on disk: {size / frames:,.0f} (shards only; {frames:,} frames)\n")
     rmed = {k: statistics.median(r[k] for r in reads) for k in reads[0]}
     print("| read-back | stacks/s |")
@@ -149,7 +155,7 @@ def main() -> None:
     print(f"events per {args.agent} episode (mean of {args.episodes}, sim event record): "
           + ", ".join(f"{k} {v:.1f} (min {min(events[k])}, max {max(events[k])})"
                       for k, v in per.items()))
-    need = max(TARGET_EVENTS / max(per["barracks"], 1e-9), TARGET_EVENTS / max(per["marines"], 1e-9))
+    need = max(TARGET_EVENTS / max(per[k], 1e-9) for k in ("barracks", "marines"))
     episodes_needed = int(np.ceil(need))
     seconds = episodes_needed * EPISODE_STEPS / med["k2"]
     print(f"≥ {TARGET_EVENTS:,} barracks placed and ≥ {TARGET_EVENTS:,} marines completed need "

@@ -64,7 +64,8 @@ def info(folder: Path) -> list[str]:
              f"episodes  {table.num_rows}   stacks {steps:,}   frames {frames:,}   "
              f"shards {len(stats)}",
              f"bytes     {size:,} on disk   {per_frame:,.0f} B/frame   "
-             f"(raw {schema.frame_bytes():,} B/frame, {schema.frame_bytes() / max(per_frame, 1):,.0f}x)",
+             f"(raw {schema.frame_bytes():,} B/frame, "
+             f"{schema.frame_bytes() / max(per_frame, 1):,.0f}x)",
              "settings  " + "  ".join(f"{k}={v}" for k, v in manifest["settings"].items()
                                       if k != "codec"),
              f"codec     {manifest['settings'].get('codec')}",

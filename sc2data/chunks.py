@@ -20,13 +20,17 @@ import hdf5plugin
 import numpy as np
 import zstandard
 
+from sc2data.errors import Sc2DataError
+
 ZSTD_FILTER = 32015
 """HDF5 filter id of Zstandard (registered by hdf5plugin)."""
 FLETCHER32_FILTER = int(h5py.h5z.FILTER_FLETCHER32)
 
 
-class ChecksumError(OSError):
-    """A chunk's fletcher32 checksum does not match its bytes: the file is damaged."""
+class ChecksumError(Sc2DataError, OSError):
+    """A chunk's fletcher32 checksum does not match its bytes: the file is damaged. An
+    :class:`Sc2DataError` (commands print it as one line) and an ``OSError``, like h5py's own
+    checksum failures."""
 
 
 @dataclass(frozen=True)
@@ -94,27 +98,32 @@ class ChunkEncoder:
 
 
 class ChunkDecoder:
-    """Verifies and decompresses raw chunk payloads as stored on disk."""
+    """Verifies and decompresses raw chunks as stored on disk (payload + fletcher32)."""
 
     def __init__(self) -> None:
         self._zstd = zstandard.ZstdDecompressor()
 
-    def decode(self, raws: Sequence[bytes], masks: Sequence[int], size: int,
-               where: str) -> list[bytes]:
-        """Each chunk's ``size`` decoded bytes; a checksum mismatch raises ChecksumError."""
+    def decode(self, raws: Sequence[bytes], masks: Sequence[int], sizes: Sequence[int],
+               wheres: Sequence[str]) -> list[bytes]:
+        """Each chunk's decoded bytes (``sizes[i]`` of them). All checksums are verified first,
+        in one vectorised pass, so chunks of many datasets are best decoded in one call; a
+        mismatch raises :class:`ChecksumError` naming the first damaged chunk's dataset."""
         payloads = [memoryview(r)[:-4] for r in raws]
         stored = np.frombuffer(b"".join(r[-4:] for r in raws), "<u4")
         bad = np.flatnonzero(fletcher32(payloads) != stored)
         if bad.size:
-            raise ChecksumError(f"{where}: fletcher32 checksum mismatch in {bad.size} chunk(s); "
-                                f"the file is damaged")
-        try:
-            out = [bytes(p) if m & 1 else self._zstd.decompress(p, max_output_size=size)
-                   for p, m in zip(payloads, masks, strict=True)]
-        except zstandard.ZstdError as e:
-            raise ChecksumError(f"{where}: a chunk does not decompress ({e})") from None
-        if any(len(d) != size for d in out):
-            raise ChecksumError(f"{where}: a chunk decodes to the wrong size; the file is damaged")
+            raise ChecksumError(f"{wheres[bad[0]]}: fletcher32 checksum mismatch in {bad.size} "
+                                f"chunk(s); the file is damaged")
+        out = []
+        for p, m, size, where in zip(payloads, masks, sizes, wheres, strict=True):
+            try:
+                data = bytes(p) if m & 1 else self._zstd.decompress(p, max_output_size=size)
+            except zstandard.ZstdError as e:
+                raise ChecksumError(f"{where}: a chunk does not decompress ({e})") from None
+            if len(data) != size:
+                raise ChecksumError(f"{where}: a chunk decodes to the wrong size; the file is "
+                                    f"damaged")
+            out.append(data)
         return out
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Optional
+from typing import Any, Optional
 
 import typer
 
@@ -41,6 +41,52 @@ app.add_typer(rules_app, name="rules")
 _RULES_DIR_HELP = "Also load the rules defined by the .py files of this folder."
 
 
+# -- Ray options, shared by rollout and label (sc2data.scaleout) --------------------------------
+def _ray_option() -> Any:
+    return typer.Option(None, "--ray", metavar="[ADDRESS]",
+                        help="Run as Ray tasks: --ray alone starts a local Ray instance; auto, "
+                             "HOST:PORT or ray://HOST:PORT joins a running cluster.")
+
+
+def _ray_retries() -> Any:
+    return typer.Option(2, "--ray-retries", help="With --ray: extra attempts per task after a "
+                                                 "worker death, a crashed game or a hang.")
+
+
+def _ray_timeout() -> Any:
+    return typer.Option(600.0, "--ray-timeout", help="With --ray: seconds a task may go "
+                                                     "without progress before it is retried.")
+
+
+def _ray_memory() -> Any:
+    return typer.Option(None, "--ray-memory", help="With --ray: MB of memory to request per "
+                                                   "task [default: 512 sim, 2048 sc2, 1024 "
+                                                   "label].")
+
+
+def _ray_options(address: str, retries: int, timeout: float, memory: Optional[int],
+                 workers: Optional[int] = None) -> Any:
+    from sc2data.scaleout import RayOptions, require_ray
+
+    require_ray()
+    options = RayOptions.parse(address, retries=retries, timeout_s=timeout, memory_mb=memory,
+                               workers=workers)
+    options.validate()
+    return options
+
+
+def _bare_ray(argv: list[str]) -> list[str]:
+    """``--ray`` with no address means ``--ray local``: typer has no optional option values."""
+    from sc2data.scaleout import is_address
+
+    out: list[str] = []
+    for j, arg in enumerate(argv):
+        out.append(arg)
+        if arg == "--ray" and (j + 1 == len(argv) or not is_address(argv[j + 1])):
+            out.append("local")
+    return out
+
+
 @rules_app.command("list")
 def rules_list(
     rules_dir: Optional[Path] = typer.Option(None, "--rules-dir", help=_RULES_DIR_HELP),
@@ -61,16 +107,31 @@ def label(
     rules_dir: Optional[Path] = typer.Option(None, "--rules-dir", help=_RULES_DIR_HELP),
     batch_size: int = typer.Option(256, "--batch-size", help="Stacks per rule call."),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Show a progress bar."),
+    ray: Optional[str] = _ray_option(),
+    ray_retries: int = _ray_retries(),
+    ray_timeout: float = _ray_timeout(),
+    ray_memory: Optional[int] = _ray_memory(),
 ) -> None:
     """Label every stack of DATA with the rules; writes labels.parquet and stack_labels.parquet."""
     from sc2data.label import label_dataset
     from sc2data.registry import parse_ids
 
-    summary = label_dataset(data, include=parse_ids(rules), exclude=parse_ids(exclude) or [],
-                            rules_dir=rules_dir, batch_size=batch_size, progress=progress)
+    selection = {"include": parse_ids(rules), "exclude": parse_ids(exclude) or [],
+                 "rules_dir": rules_dir, "batch_size": batch_size, "progress": progress}
+    lines: list[str] = []
+    if ray is not None:
+        from sc2data.scaleout import label_on_ray
+
+        options = _ray_options(ray, ray_retries, ray_timeout, ray_memory)
+        summary, report = label_on_ray(data, options, **selection)
+        lines = report.lines() if report.tasks else []
+    else:
+        summary = label_dataset(data, **selection)
     if summary.up_to_date:
         typer.echo("labels are up to date (same rules, same data)")
     typer.echo(summary.table())
+    for line in lines:
+        typer.echo(line)
 
 
 @app.command()
@@ -102,11 +163,17 @@ def rollout(
                                                     "(27+11)."),
     recipe: Optional[Path] = typer.Option(None, help="Take the settings above from a recipe "
                                                      "(manifests/*.toml)."),
-    workers: int = typer.Option(1, help="Worker processes (the data does not depend on it)."),
+    workers: Optional[int] = typer.Option(None, help="Worker processes [default: 1]; with --ray, "
+                                                     "tasks at once [default: all CPUs]. The "
+                                                     "data does not depend on it."),
     episodes_per_shard: int = typer.Option(8, help="Episodes per shard file."),
     max_steps: Optional[int] = typer.Option(None, help="Cut episodes after this many steps."),
     progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",
                                             help="Progress bar (default: on a terminal)."),
+    ray: Optional[str] = _ray_option(),
+    ray_retries: int = _ray_retries(),
+    ray_timeout: float = _ray_timeout(),
+    ray_memory: Optional[int] = _ray_memory(),
 ) -> None:
     """Play episodes and store every 2-frame stack in sharded, checksummed HDF5."""
     from sc2data.errors import Sc2DataError
@@ -125,9 +192,19 @@ def rollout(
         config = RolloutConfig.from_recipe(load(recipe), **extra)
     else:
         config = RolloutConfig(**given, **extra)
-    s = run(config, out, workers=workers, progress=progress)
+    lines: list[str] = []
+    if ray is not None:
+        from sc2data.scaleout import rollout_on_ray
+
+        options = _ray_options(ray, ray_retries, ray_timeout, ray_memory, workers)
+        s, report = rollout_on_ray(config, out, options, progress=progress)
+        lines = report.lines() if report.tasks else []
+    else:
+        s = run(config, out, workers=1 if workers is None else workers, progress=progress)
     typer.echo(f"{s.out}: {s.episodes} episodes, {s.steps:,} stacks in {s.seconds:.1f} s "
                f"({s.shards_written} shards written, {s.shards_kept} kept)")
+    for line in lines:
+        typer.echo(line)
 
 
 @app.command()
@@ -260,6 +337,7 @@ def main(argv: list[str] | None = None) -> None:
     """Console entry point: user errors become one line on stderr and exit status 2."""
     command = typer.main.get_command(app)
     try:
+        argv = _bare_ray(sys.argv[1:] if argv is None else list(argv))
         rc = command.main(args=argv, prog_name="sc2data", standalone_mode=False)
         # Non-standalone click returns typer.Exit(code) instead of raising it; typer turns a
         # Ctrl-C inside a command into a returned 130.

@@ -24,9 +24,10 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from sc2data.chunks import ChunkDecoder
 from sc2data.errors import Sc2DataError
 from sc2data.schema import Schema, SchemaError, StackBatch
-from sc2data.storage import Shard, fsync_path
+from sc2data.storage import FrameSource, Shard, fsync_path
 
 DATASET_FORMAT = "sc2data-dataset"
 DATASET_FORMAT_VERSION = 1
@@ -62,7 +63,8 @@ def write_atomic(path: Path, data: bytes) -> None:
 
 
 def write_manifest(folder: Path, manifest: dict[str, Any]) -> None:
-    write_atomic(folder / MANIFEST, (json.dumps(manifest, indent=2, sort_keys=True) + "\n").encode())
+    text = json.dumps(manifest, indent=2, sort_keys=True) + "\n"
+    write_atomic(folder / MANIFEST, text.encode())
 
 
 def write_index(folder: Path, rows: Sequence[dict[str, Any]]) -> None:
@@ -185,6 +187,7 @@ class Dataset:
         self._shard_of = np.searchsorted(np.asarray(self.shard_names, dtype=object), names)
         self._stack_offsets = np.concatenate([[0], np.cumsum(self.n_steps)])
         self._cache = _ChunkCache(cache_bytes)
+        self._decoder = ChunkDecoder()
         self._frame_layout: dict[str, tuple[tuple[int, ...], np.dtype]] = {
             l.key: ((self.schema.size(l.group),) * 2, l.dtype) for l in self.schema.layers}
         self._frame_layout.update({v.name: ((v.size,), v.dtype) for v in self.schema.vectors})
@@ -251,24 +254,50 @@ class Dataset:
         return keys
 
     # -- reading ------------------------------------------------------------------------------
-    def _gather(self, si: int, key: str, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(buffer, rows): ``buffer[rows]`` are frames ``frames`` of shard ``si``'s ``key``.
+    def _chunks(self, si: int, keys: Sequence[str], frames: np.ndarray
+                ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Per key, (buffer, rows): ``buffer[rows]`` are frames ``frames`` of shard ``si``.
 
-        Each chunk is decoded once per call, or taken from the cache of decoded chunks.
+        Each chunk is taken from the cache or decoded once; the checksums of every chunk this
+        call decodes, of all keys, are verified together in one vectorised pass.
         """
-        src = self._shard(si).frames(key)
-        c = src.chunk_frames
-        ids, inverse = np.unique(frames // c, return_inverse=True)
-        cache = self._cache
-        datas: list[bytes | None] = [cache.get((si, key, i)) for i in ids.tolist()]
-        missing = [j for j, d in enumerate(datas) if d is None]
-        if missing:
-            for j, data in zip(missing, src.read_chunks(ids[missing]), strict=True):
-                datas[j] = data
-                cache.put((si, key, int(ids[j])), data)
-        buf = np.frombuffer(datas[0] if len(datas) == 1 else b"".join(datas),  # type: ignore[arg-type]
-                            src.dtype).reshape(-1, *src.frame_shape)
-        return buf, inverse.reshape(-1) * c + frames % c
+        shard, cache = self._shard(si), self._cache
+        plans: list[tuple[str, FrameSource, np.ndarray, np.ndarray, list[bytes | None]]] = []
+        raws: list[bytes] = []
+        masks: list[int] = []
+        sizes: list[int] = []
+        wheres: list[str] = []
+        owners: list[tuple[int, int]] = []  # (plan, position in that plan's chunk list)
+        for key in keys:
+            src = shard.frames(key)
+            ids, inverse = np.unique(frames // src.chunk_frames, return_inverse=True)
+            datas: list[bytes | None] = [cache.get((si, key, i)) for i in ids.tolist()]
+            missing = [j for j, d in enumerate(datas) if d is None]
+            if missing and src.fast:
+                r, m = src.raw_chunks(ids[missing])
+                raws += r
+                masks += m
+                sizes += [src.chunk_bytes] * len(r)
+                wheres += [src.where] * len(r)
+                owners += [(len(plans), j) for j in missing]
+            elif missing:
+                for j, data in zip(missing, src.read_chunks(ids[missing]), strict=True):
+                    datas[j] = data
+            plans.append((key, src, ids, inverse, datas))
+        if raws:
+            for (p, j), data in zip(owners, self._decoder.decode(raws, masks, sizes, wheres),
+                                    strict=True):
+                plans[p][4][j] = data
+        out = {}
+        for key, src, ids, inverse, datas in plans:
+            chunks = [d for d in datas if d is not None]
+            assert len(chunks) == len(datas)
+            for i, chunk in zip(ids.tolist(), chunks):
+                cache.put((si, key, i), chunk)
+            buf = np.frombuffer(chunks[0] if len(chunks) == 1 else b"".join(chunks),
+                                src.dtype).reshape(-1, *src.frame_shape)
+            out[key] = (buf, inverse.reshape(-1) * src.chunk_frames + frames % src.chunk_frames)
+        return out
 
     def read(self, episodes: Sequence[int] | np.ndarray, steps: Sequence[int] | np.ndarray,
              keys: Iterable[str] | None = None) -> StackBatch:
@@ -290,8 +319,7 @@ class Dataset:
             sel = None if len(shards) == 1 else np.flatnonzero(shard_of == si)
             f = first if sel is None else first[sel]
             need = np.stack([f, f + 1], axis=1).reshape(-1)  # (previous, current) interleaved
-            for k in keys:
-                buf, at = self._gather(si, k, need)
+            for k, (buf, at) in self._chunks(si, keys, need).items():
                 flat = out[k].reshape(-1, *buf.shape[1:])
                 if sel is None:
                     np.take(buf, at, axis=0, out=flat, mode="clip")

@@ -55,6 +55,9 @@ DEFAULT_BATCH = 256
 
 Batches = Iterable[tuple[np.ndarray, np.ndarray, StackBatch]]
 """``(episode ids, steps, StackBatch)`` triples, as ``Dataset.iter_batches`` yields them."""
+UnitRunner = Callable[[Sequence[tuple["Unit", Path]], Sequence[str], int, Any], None]
+"""Labels units elsewhere than in this process (Ray tasks: ``sc2data.scaleout.RayUnits``):
+``runner([(unit, part path), …], keys, batch_size, bar)``, each through :func:`write_part`."""
 
 
 @dataclass(frozen=True)
@@ -208,11 +211,19 @@ def _with_meta(table: pa.Table, meta: dict[str, Any]) -> pa.Table:
     return table.replace_schema_metadata({META_KEY: json.dumps(meta).encode()})
 
 
+def write_part(unit: Unit, rules: Sequence[Registered], keys: Sequence[str], batch_size: int,
+               path: Path, on_batch: Callable[[int], None] | None = None) -> None:
+    """Label one unit and write its part atomically at ``path``."""
+    _write_atomic(label_batches(unit.batches(batch_size, keys), rules, on_batch=on_batch), path)
+
+
 def label(source: Source, rules: Sequence[Registered], out_dir: Path | str, *,
-          batch_size: int = DEFAULT_BATCH, progress: bool = True) -> LabelSummary:
+          batch_size: int = DEFAULT_BATCH, progress: bool = True,
+          run_units: UnitRunner | None = None) -> LabelSummary:
     """Label every unit of ``source`` with ``rules`` into ``out_dir``; resumes finished units.
 
     One run at a time per folder (a lock file); an unwritable folder is a one-line error.
+    ``run_units`` labels the units instead of this process (``sc2data.scaleout``).
     """
     out = Path(out_dir)
     if batch_size < 1:
@@ -227,7 +238,7 @@ def label(source: Source, rules: Sequence[Registered], out_dir: Path | str, *,
     try:
         out.mkdir(parents=True, exist_ok=True)
         with _lock(out):
-            return _run(source, rules, out, fp, batch_size, progress)
+            return _run(source, rules, out, fp, batch_size, progress, run_units)
     except OSError as e:
         raise Sc2DataError(f"cannot write labels in {out}: {e.strerror or e}; check the folder "
                            f"is writable and has space") from e
@@ -248,7 +259,7 @@ def _lock(out: Path) -> Iterator[None]:
 
 
 def _run(source: Source, rules: Sequence[Registered], out: Path, fp: str, batch_size: int,
-         progress: bool) -> LabelSummary:
+         progress: bool, run_units: UnitRunner | None = None) -> LabelSummary:
     from tqdm import tqdm
 
     from sc2data.provenance import versions
@@ -273,11 +284,12 @@ def _run(source: Source, rules: Sequence[Registered], out: Path, fp: str, batch_
     with tqdm(total=total, unit="stack", unit_scale=True, desc="label", disable=not progress,
               dynamic_ncols=True) as bar:
         bar.update(sum(u.stacks for u, n in zip(source.units, names) if n in finished))
-        for unit, name in zip(source.units, names):
-            if name in finished:
-                continue
-            table = label_batches(unit.batches(batch_size, keys), rules, on_batch=bar.update)
-            _write_atomic(table, parts / name)
+        todo = [(u, parts / n) for u, n in zip(source.units, names) if n not in finished]
+        if run_units is not None:
+            run_units(todo, keys, batch_size, bar)
+        else:
+            for unit, path in todo:
+                write_part(unit, rules, keys, batch_size, path, on_batch=bar.update)
     wide = pa.concat_tables([pq.read_table(parts / n) for n in names]) if names else \
         label_batches((), rules)
     summary_counts = {e.id: int(pc_sum(wide.column(e.id))) for e in rules}
@@ -422,9 +434,11 @@ def dataset_source(path: Path | str) -> Source:
 
 def label_dataset(data: Path | str, *, include: Sequence[str] | None = None,
                   exclude: Sequence[str] = (), rules_dir: Path | str | None = None,
-                  batch_size: int = DEFAULT_BATCH, progress: bool = True) -> LabelSummary:
+                  batch_size: int = DEFAULT_BATCH, progress: bool = True,
+                  run_units: UnitRunner | None = None) -> LabelSummary:
     """``sc2data label``: load and select rules, open the dataset, label it into its folder."""
     from sc2data.registry import load_registry
 
     rules = load_registry(rules_dir).select(include, exclude)
-    return label(dataset_source(data), rules, data, batch_size=batch_size, progress=progress)
+    return label(dataset_source(data), rules, data, batch_size=batch_size, progress=progress,
+                 run_units=run_units)

@@ -107,14 +107,21 @@ def _existing(out: Path, identity: dict[str, Any]) -> dict[str, Any] | None:
 
 def _pack_split(ds: Any, split: str, pairs: pa.Table, path: Path, seed: int,
                 progress: Any) -> tuple[pa.Table, int]:
-    """Copy the split's distinct stacks into ``path`` in a seeded random order; add ``state``."""
+    """Copy the split's distinct stacks into ``path``; add each pair's ``state`` row.
+
+    Rows go episode by episode, the episodes in a seeded random order and each episode's steps
+    in order: reads stay nearly sequential (an episode's chunks are decoded once), while any
+    block of rows mixes several episodes from anywhere in the data for the trainer to shuffle.
+    """
     episode = pairs["episode"].to_numpy()
     step = pairs["step"].to_numpy().astype(np.int64)
     keys = episode * (1 << 20) + step  # episodes have far fewer than 2**20 steps
     unique, inverse = np.unique(keys, return_inverse=True)
     rng = np.random.default_rng(np.random.SeedSequence([seed, SPLITS.index(split), 0x9AC4]))
-    order = rng.permutation(len(unique))  # row r of the file holds stack unique[order[r]]
-    row_of = np.empty(len(unique), np.int64)
+    episodes = np.unique(unique >> 20)
+    rank = dict(zip(episodes.tolist(), rng.permutation(len(episodes)).tolist()))
+    order = np.lexsort((unique, np.array([rank[e] for e in (unique >> 20).tolist()])))
+    row_of = np.empty(len(unique), np.int64)  # row r of the file holds stack unique[order[r]]
     row_of[order] = np.arange(len(unique))
     writer = PackedWriter(path, ds.schema, len(unique), attrs={"split": split})
     try:

@@ -2,27 +2,21 @@
 
 Shard ``i`` holds episodes ``[i·E, (i+1)·E)`` and episode ``e`` is seeded from ``(seed, e)``
 alone, so the data never depends on the number of workers. K worker processes each write whole
-shards as ``*.h5.partial`` and rename them when complete and fsynced; the parent shows one progress
-bar fed by the workers through a queue, and writes ``index.parquet`` last. Rerunning the same
-command after an interruption (Ctrl-C, ``kill -9``) deletes stale partials, keeps the complete
-shards and finishes the rest; other settings in the same folder are refused.
+shards as ``*.h5.partial`` and rename them when complete and fsynced (:mod:`sc2data.workers`);
+the parent shows one progress bar fed by the workers, and writes ``index.parquet`` last.
+Rerunning the same command after an interruption (Ctrl-C, ``kill -9``) deletes stale partials,
+keeps the complete shards and finishes the rest; other settings in the same folder are refused.
 """
 
 from __future__ import annotations
 
 import contextlib
-import ctypes
-import fcntl
 import functools
-import multiprocessing as mp
 import os
-import queue
 import random
 import shutil
-import signal
-import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -37,11 +31,18 @@ from sc2data.errors import Sc2DataError
 from sc2data.provenance import versions
 from sc2data.schema import Schema
 from sc2data.storage import Shard, ShardWriter, fsync_path, sha256_file
+from sc2data.workers import LOCK, FolderLock, run_parallel
 
 EnvFactory = Callable[[int], Any]
 """``seed -> environment.Base`` (a pysc2 environment) for one episode."""
 AgentFactory = Callable[[int], Any]
 """``seed -> pysc2 BaseAgent`` for one episode."""
+ShardRunner = Callable[["RolloutConfig", Path, list[int], EnvFactory, AgentFactory, Any],
+                      dict[int, list[dict[str, Any]]]]
+"""Writes the shards ``todo`` elsewhere than in local worker processes (Ray tasks:
+``sc2data.scaleout.RayShards``): ``runner(config, out, todo, env_factory, agent_factory, bar)``,
+each shard through :func:`write_shard`, feeding the progress ``bar``; returns what
+:func:`write_shard` returned, by shard."""
 LAYER_SETS: tuple[str, ...] = ("paper", "full")
 
 
@@ -171,22 +172,26 @@ def shard_attrs(config: RolloutConfig, i: int) -> dict[str, Any]:
             "episode_start": span.start, "episode_stop": span.stop}
 
 
-def index_rows(path: Path) -> list[dict[str, Any]]:
-    """Index rows of a complete shard: its episode table plus the file's sha256 and size."""
+def index_rows(path: Path, name: str | None = None) -> list[dict[str, Any]]:
+    """Index rows of a complete shard (listed as ``name``, default its file name): its episode
+    table plus the file's sha256 and size."""
     shard = Shard(path)
     try:
         table = shard.episodes
     finally:
         shard.close()
     digest, size = sha256_file(path), path.stat().st_size
-    return [{"shard": path.name, **{c: (float(v[j]) if c == "reward" else int(v[j]))
+    return [{"shard": name or path.name, **{c: (float(v[j]) if c == "reward" else int(v[j]))
                                     for c, v in table.items()},
              "shard_sha256": digest, "shard_bytes": size} for j in range(len(table["episode"]))]
 
 
-def write_shard(config: RolloutConfig, out: Path, i: int, env_factory: EnvFactory,
-                agent_factory: AgentFactory, report: Callable[[int], None]) -> None:
-    """Play shard ``i``'s episodes into ``shard-i.h5.partial``, then give it its final name."""
+def write_shard(config: RolloutConfig, out: Path, env_factory: EnvFactory,
+                agent_factory: AgentFactory, i: int, report: Callable[[int], None]
+                ) -> list[dict[str, Any]]:
+    """Play shard ``i``'s episodes into ``shard-i.h5.partial``, then give it its final name.
+
+    Returns the shard's index rows (hashed here, so that K workers hash in parallel)."""
     final = out / shard_name(i)
     partial = final.with_name(final.name + PARTIAL)
     writer = ShardWriter(partial, config.schema, config.codec, shard_attrs(config, i))
@@ -210,8 +215,10 @@ def write_shard(config: RolloutConfig, out: Path, i: int, env_factory: EnvFactor
         writer.abort()
         partial.unlink(missing_ok=True)
         raise
+    rows = index_rows(partial, final.name)
     os.replace(partial, final)
     fsync_path(out)
+    return rows
 
 
 # -- the folder ---------------------------------------------------------------------------------
@@ -262,7 +269,10 @@ def prepare_folder(config: RolloutConfig, out: Path) -> list[int]:
     if not (out / MANIFEST).exists():
         write_manifest(out, manifest_for(config))
     for stale in out.glob(f"*{PARTIAL}"):
-        stale.unlink()
+        if stale.is_dir():  # an attempt folder of a Ray task (sc2data.scaleout)
+            shutil.rmtree(stale)
+        else:
+            stale.unlink()
     todo = []
     for i in range(config.n_shards):
         path = out / shard_name(i)
@@ -280,140 +290,11 @@ def prepare_folder(config: RolloutConfig, out: Path) -> list[int]:
     return todo
 
 
-LOCK = ".lock"
-_LOCK_WAIT_S = 10.0
-
-
-class FolderLock:
-    """``flock`` on ``out/.lock``. A run holds it exclusively while it prepares the folder, then
-    shared, as its workers do; a second run waits for every process of the first (orphaned
-    workers of a killed run included) and refuses to write the folder alongside it."""
-
-    def __init__(self, out: Path, exclusive: bool) -> None:
-        self.out = out
-        self._fd = os.open(out / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
-        try:
-            self._take(fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH)
-        except BaseException:
-            os.close(self._fd)
-            raise
-
-    def _take(self, mode: int) -> None:
-        deadline = time.monotonic() + _LOCK_WAIT_S
-        while True:
-            try:
-                fcntl.flock(self._fd, mode | fcntl.LOCK_NB)
-                return
-            except BlockingIOError:
-                if time.monotonic() > deadline:
-                    raise Sc2DataError(f"another sc2data rollout is writing to {self.out}; wait "
-                                       f"for it to finish or stop it") from None
-                time.sleep(0.05)
-
-    def share(self) -> None:
-        """Downgrade to a shared lock, so that this run's workers can take theirs."""
-        fcntl.flock(self._fd, fcntl.LOCK_SH)
-
-    def __enter__(self) -> FolderLock:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        os.close(self._fd)
-
-
-def _die_with_parent() -> None:
-    """Linux: have the kernel kill this worker when its parent dies (e.g. ``kill -9``)."""
-    with contextlib.suppress(OSError, AttributeError):
-        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
-
-
-# -- workers ------------------------------------------------------------------------------------
-def _worker(tasks: Any, results: Any, config: RolloutConfig, out: Path, env_factory: EnvFactory,
-            agent_factory: AgentFactory, parent: int) -> None:
-    """A worker process: write shards from ``tasks`` until it gets ``None``."""
-    _die_with_parent()
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and stops us
-    if os.getppid() != parent:  # it died before we could ask to die with it
-        os._exit(1)
-
-    def report(n: int) -> None:
-        if os.getppid() != parent:  # orphaned where PR_SET_PDEATHSIG does not exist
-            os._exit(1)
-        results.put(("steps", n))
-
-    with FolderLock(out, exclusive=False):
-        _work(tasks, results, config, out, env_factory, agent_factory, report)
-
-
-def _work(tasks: Any, results: Any, config: RolloutConfig, out: Path, env_factory: EnvFactory,
-          agent_factory: AgentFactory, report: Callable[[int], None]) -> None:
-    while (i := tasks.get()) is not None:
-        try:
-            write_shard(config, out, i, env_factory, agent_factory, report)
-        except BaseException as e:  # noqa: BLE001 - reported to the parent, which fails
-            results.put(("error", i, str(e) if isinstance(e, Sc2DataError)
-                         else f"{type(e).__name__}: {e}"))
-            return
-        results.put(("done", i, None))
-
-
 def _progress(total: int, show: bool | None) -> Any:
     from tqdm import tqdm
 
     return tqdm(total=total, unit="step", unit_scale=True, dynamic_ncols=True, smoothing=0.1,
                 disable=None if show is None else not show, desc="rollout")
-
-
-def _run_parallel(config: RolloutConfig, out: Path, todo: list[int], workers: int,
-                  env_factory: EnvFactory, agent_factory: AgentFactory, bar: Any) -> None:
-    # spawn, not forkserver: a forkserver's children are not ours, so they would outlive a
-    # ``kill -9`` of this process; spawned ones are, and die with it (_die_with_parent).
-    ctx = mp.get_context("spawn")
-    tasks, results = ctx.Queue(), ctx.Queue()
-    for i in todo:
-        tasks.put(i)
-    n = min(workers, len(todo))
-    for _ in range(n):
-        tasks.put(None)
-    procs = [ctx.Process(target=_worker, args=(tasks, results, config, out, env_factory,
-                                               agent_factory, os.getpid()), daemon=True)
-             for _ in range(n)]
-    # Workers inherit an ignored SIGINT, so that a Ctrl-C while they import cannot hit them:
-    # the parent alone handles it, and stops them.
-    main_thread = threading.current_thread() is threading.main_thread()
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main_thread else None
-    try:
-        for p in procs:
-            p.start()
-    finally:
-        if main_thread:
-            signal.signal(signal.SIGINT, previous)
-    pending = set(todo)
-    try:
-        while pending:
-            try:
-                msg = results.get(timeout=0.5)
-            except queue.Empty:
-                dead = [p for p in procs if p.exitcode not in (None, 0)]
-                if dead:
-                    raise Sc2DataError(f"a rollout worker died (exit code {dead[0].exitcode}); "
-                                       f"rerun the same command to resume") from None
-                continue
-            if msg[0] == "steps":
-                bar.update(msg[1])
-            elif msg[0] == "done":
-                pending.discard(msg[1])
-            else:
-                raise Sc2DataError(f"rollout of {shard_name(msg[1])} failed: {msg[2]}")
-    finally:
-        for p in procs:
-            if p.is_alive() and pending:
-                p.terminate()
-        for p in procs:
-            p.join()
-        if pending:  # interrupted or failed: leave no half-written shard behind
-            for stale in out.glob(f"*{PARTIAL}"):
-                stale.unlink(missing_ok=True)
 
 
 def _fail_fast(config: RolloutConfig, env_factory: EnvFactory,
@@ -442,11 +323,13 @@ class RolloutSummary:
 
 def rollout(config: RolloutConfig, out: str | os.PathLike[str], workers: int = 1,
             progress: bool | None = None, env_factory: EnvFactory | None = None,
-            agent_factory: AgentFactory | None = None) -> RolloutSummary:
+            agent_factory: AgentFactory | None = None,
+            runner: ShardRunner | None = None) -> RolloutSummary:
     """Roll out ``config`` into folder ``out`` with ``workers`` processes; resumable.
 
     ``env_factory``/``agent_factory`` replace the defaults (``make_env(config.env, seed=…)``,
     ``make_agent(config.agent, seed=…)``); they must be picklable for ``workers > 1``.
+    ``runner`` writes the shards instead of local processes (``sc2data.scaleout``).
     """
     out = Path(out)
     config.validate()
@@ -477,14 +360,17 @@ def rollout(config: RolloutConfig, out: str | os.PathLike[str], workers: int = 1
         per_episode = config.max_steps or envs.EPISODE_STEPS
         total = sum(len(config.shard_episodes(i)) for i in todo) * per_episode
         with _progress(total, progress) as bar:
-            if workers == 1 or len(todo) <= 1:
-                for i in todo:
-                    write_shard(config, out, i, env_factory, agent_factory, bar.update)
+            job = functools.partial(write_shard, config, out, env_factory, agent_factory)
+            if runner is not None:
+                written = runner(config, out, todo, env_factory, agent_factory, bar)
+            elif workers == 1 or len(todo) <= 1:
+                written = {i: job(i, bar.update) for i in todo}
             else:
-                _run_parallel(config, out, todo, workers, env_factory, agent_factory, bar)
+                written = run_parallel(job, todo, workers, out, bar.update, shard_name)
             bar.total = bar.n
             bar.refresh()
-        rows = [row for i in range(config.n_shards) for row in index_rows(out / shard_name(i))]
+        rows = [row for i in range(config.n_shards)
+                for row in written.get(i) or index_rows(out / shard_name(i))]
         write_index(out, rows)
     return RolloutSummary(out, len(todo), config.n_shards - len(todo), len(rows),
                           sum(r["n_steps"] for r in rows), time.perf_counter() - started)

@@ -66,6 +66,15 @@ class Layer:
         """Smallest lossless unsigned dtype for this layer's scale."""
         return np.dtype(np.uint8) if self.scale <= 256 else np.dtype(np.uint16)
 
+    @property
+    def limit(self) -> int:
+        """One past the largest value kept losslessly: the dtype's range, not the scale.
+
+        pysc2's scale is nominal for counts: ``unit_density`` declares 16, yet more units than
+        that can stand on one pixel (pysc2 does not clip). Such values still fit the dtype.
+        """
+        return int(np.iinfo(self.dtype).max) + 1
+
 
 def layer(group: Group, name: str) -> Layer:
     """Look a layer up in pysc2's table by group and name."""
@@ -162,8 +171,8 @@ class Schema:
             planes = np.asarray(obs[_OBS_KEY[group]])
             for l in self.group(group):
                 plane = planes[l.index]
-                if plane.size and (plane.min() < 0 or plane.max() >= l.scale):
-                    raise ValueError(f"{l.key} holds values outside [0, {l.scale})")
+                if plane.size and (plane.min() < 0 or plane.max() >= l.limit):
+                    raise ValueError(f"{l.key} holds values outside [0, {l.limit})")
                 out[l.key] = plane.astype(l.dtype, copy=False)
         for v in self.vectors:
             out[v.name] = np.asarray(obs[v.name]).astype(v.dtype, copy=False).reshape(v.size)

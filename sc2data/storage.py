@@ -71,6 +71,10 @@ def fsync_path(path: Path) -> None:
         os.close(fd)
 
 
+class ObservationError(Sc2DataError, ValueError):
+    """An observation the schema cannot store losslessly (a value its layer's dtype cannot hold)."""
+
+
 def sha256_file(path: Path) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as f:
@@ -97,7 +101,8 @@ class ShardWriter:
             # Integers stay integers for any HDF5 tool; everything else is JSON, unambiguously.
             self._file.attrs[k] = v if type(v) is int else json.dumps(v)
         c = codec.chunk_frames
-        self._shapes = {l.key: (schema.size(l.group),) * 2 for l in schema.layers}
+        self._shapes: dict[str, tuple[int, ...]] = {
+            l.key: (schema.size(l.group),) * 2 for l in schema.layers}
         self._shapes.update({v.name: (v.size,) for v in schema.vectors})
         self._dtypes = {l.key: l.dtype for l in schema.layers}
         self._dtypes.update({v.name: v.dtype for v in schema.vectors})
@@ -109,7 +114,7 @@ class ShardWriter:
         self._ids = [(self._frames[k].id, (0,) * len(self._shapes[k]), self._buffers[k])
                      for k in schema.keys()]
         self._groups = [(f"feature_{g}", np.array([l.index for l in schema.group(g)]),
-                         np.array([l.scale for l in schema.group(g)]),
+                         np.array([l.limit for l in schema.group(g)]),
                          [self._buffers[l.key] for l in schema.group(g)], schema.group(g))
                         for g in ("screen", "minimap") if schema.group(g)]
         self._vectors = [(v.name, self._buffers[v.name]) for v in schema.vectors]
@@ -142,17 +147,23 @@ class ShardWriter:
         same lossless range check, but one vectorised check per group and no intermediate copy.
         """
         slot = self._n_frames % self.codec.chunk_frames
-        for obs_key, index, scale, buffers, layers in self._groups:
-            planes = np.asarray(obs[obs_key])[index]
-            if planes.dtype == np.int32:  # one pass: negatives read as unsigned exceed any scale
-                bad = planes.view(np.uint32).max(axis=(1, 2)) >= scale
+        for obs_key, index, limit, buffers, layers in self._groups:
+            planes = np.asarray(obs[obs_key])
+            flat = planes.reshape(len(planes), -1)
+            if planes.dtype == np.int32:  # one pass: negatives read as unsigned exceed any limit
+                bad = flat.view(np.uint32).max(axis=1)[index] >= limit
             else:
-                bad = (planes.max(axis=(1, 2)) >= scale) | (planes.min(axis=(1, 2)) < 0)
+                bad = (flat.max(axis=1)[index] >= limit) | (flat.min(axis=1)[index] < 0)
             if bad.any():
                 l = layers[int(np.flatnonzero(bad)[0])]
-                raise ValueError(f"{l.key} holds values outside [0, {l.scale})")
-            for buf, plane in zip(buffers, planes):
-                buf[slot] = plane
+                plane = planes[l.index]
+                raise ObservationError(
+                    f"frame {self._n_frames - (self._current or {}).get('frame_start', 0)} of "
+                    f"episode {(self._current or {}).get('episode')}: {l.key} holds values "
+                    f"outside [0, {l.limit}) (min {plane.min()}, max {plane.max()}), which its "
+                    f"{l.dtype} cannot store losslessly")
+            for buf, i in zip(buffers, index.tolist()):
+                buf[slot] = planes[i]
         for name, buf in self._vectors:
             buf[slot] = np.asarray(obs[name]).reshape(buf.shape[1:])
         self._next_frame()
@@ -277,13 +288,26 @@ class FrameSource:
             self._table = (offset, size, mask)
         return self._table
 
+    @property
+    def fast(self) -> bool:
+        """True when chunks come raw off the memory map (then use :meth:`raw_chunks`)."""
+        return self._mm is not None
+
+    def raw_chunks(self, ids: np.ndarray) -> tuple[list[bytes], list[int]]:
+        """Fast path: the stored bytes (payload + checksum) and filter masks of chunks ``ids``,
+        for a :class:`~sc2data.chunks.ChunkDecoder` to verify and decode."""
+        assert self._mm is not None
+        offset, size, mask = self._chunk_table()
+        mm = self._mm
+        raws = [mm[o:o + n] for o, n in zip(offset[ids].tolist(), size[ids].tolist())]
+        return raws, mask[ids].tolist()
+
     def read_chunks(self, ids: np.ndarray) -> list[bytes]:
         """The decoded bytes of chunks ``ids`` (``chunk_bytes`` each, the last zero padded)."""
         if self._mm is not None:
-            offset, size, mask = self._chunk_table()
-            mm = self._mm
-            raws = [mm[o:o + n] for o, n in zip(offset[ids].tolist(), size[ids].tolist())]
-            return self._decoder.decode(raws, mask[ids].tolist(), self.chunk_bytes, self.where)
+            raws, masks = self.raw_chunks(ids)
+            return self._decoder.decode(raws, masks, [self.chunk_bytes] * len(raws),
+                                        [self.where] * len(raws))
         c, out = self.chunk_frames, []
         for i in np.asarray(ids).tolist():
             block = np.zeros((c, *self.frame_shape), self.dtype)
@@ -363,5 +387,5 @@ def _first_line(e: BaseException) -> str:
     return str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
 
 
-__all__ = ["ARG_WIDTH", "ChecksumError", "FrameSource", "Shard", "ShardWriter", "flatten_args",
-           "function_call", "fsync_path", "sha256_file"]
+__all__ = ["ARG_WIDTH", "ChecksumError", "FrameSource", "ObservationError", "Shard",
+           "ShardWriter", "flatten_args", "function_call", "fsync_path", "sha256_file"]

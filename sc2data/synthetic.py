@@ -26,10 +26,12 @@ _MM = features.MINIMAP_FEATURES
 _MINERALS = ((23, 28.5), (24, 29.5), (23, 26.5), (25, 22.5), (25, 32.5), (24, 23.5), (24, 31.5),
              (24, 25.5))
 _CC = (29.83, 28.01)
-_HIT_POINTS = {units.Terran.CommandCenter: 1500, units.Terran.SCV: 45, units.Terran.SupplyDepot: 400,
-               units.Terran.Barracks: 1000, units.Terran.Marine: 45, units.Neutral.MineralField: 0}
-_RADIUS = {units.Terran.CommandCenter: 2.75, units.Terran.SCV: 0.375, units.Terran.SupplyDepot: 1.0,
-           units.Terran.Barracks: 1.8, units.Terran.Marine: 0.375, units.Neutral.MineralField: 1.125}
+_HIT_POINTS = {units.Terran.CommandCenter: 1500, units.Terran.SCV: 45,
+               units.Terran.SupplyDepot: 400, units.Terran.Barracks: 1000,
+               units.Terran.Marine: 45, units.Neutral.MineralField: 0}
+_RADIUS = {units.Terran.CommandCenter: 2.75, units.Terran.SCV: 0.375,
+           units.Terran.SupplyDepot: 1.0, units.Terran.Barracks: 1.8,
+           units.Terran.Marine: 0.375, units.Neutral.MineralField: 1.125}
 
 
 def _screen_xy(x: float, y: float) -> tuple[float, float]:
@@ -54,6 +56,8 @@ class _Scene:
     def units(self, t: int) -> list[tuple[int, float, float, int, bool, int]]:
         """(unit type, x, y, owner, selected, hit points) of every unit at step ``t``."""
         out: list[tuple[int, float, float, int, bool, int]] = []
+        x: float
+        y: float
         out.append((units.Terran.CommandCenter, *_CC, 1, False, 1500))
         for x, y in _MINERALS:
             out.append((units.Neutral.MineralField, x, y, 16, False, 0))
@@ -116,7 +120,8 @@ def render(scene: _Scene, t: int) -> dict[str, np.ndarray]:
     np.clip(screen[_SCR.unit_density.index], 0, 15, out=screen[_SCR.unit_density.index])
     np.clip(screen[_SCR.unit_density_aa.index], 0, 255, out=screen[_SCR.unit_density_aa.index])
     loop = 8 * t
-    minerals = 50 + (loop * 52) // 100 - 100 * (t >= scene.depot_at) - 150 * (t >= scene.barracks_at)
+    minerals = (50 + (loop * 52) // 100 - 100 * (t >= scene.depot_at)
+                - 150 * (t >= scene.barracks_at))
     player = np.array([1, max(0, minerals) % 100000, 0, 12, 15, 0, 12, 0, 0, 0, 0], np.int32)
     score = np.zeros(13, np.int32)
     score[features.ScoreCumulative.collected_minerals] = (loop * 52) // 100

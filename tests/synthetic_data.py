@@ -12,8 +12,8 @@ STEPS = 30
 """Steps per synthetic episode: 31 frames, so chunks (8 frames by default) straddle episodes."""
 
 
-def config(episodes: int = 5, seed: int = 7, per_shard: int = 2, chunk_frames: int = Codec().chunk_frames,
-           **kw: object) -> RolloutConfig:
+def config(episodes: int = 5, seed: int = 7, per_shard: int = 2,
+           chunk_frames: int = Codec().chunk_frames, **kw: object) -> RolloutConfig:
     return RolloutConfig(env="sim", agent="random", episodes=episodes, seed=seed,
                          episodes_per_shard=per_shard, codec=Codec(1, chunk_frames), **kw)
 

@@ -1,4 +1,5 @@
-"""``sc2data rollout | info | verify`` as a user runs them: exit codes, one-line errors, no debris."""
+"""``sc2data rollout | info | verify`` as a user runs them: exit codes, one-line errors, no
+debris left behind."""
 
 from __future__ import annotations
 
@@ -9,30 +10,18 @@ from pathlib import Path
 import h5py
 import pytest
 
-from sc2data.cli import main
 from sc2data.dataset import INDEX
 from sc2data.schema import Schema
+from tests.cli import assert_one_line_error, run_cli
 from tests.synthetic_data import make_dataset
 from tests.test_storage import flip_byte_in_chunk
 
 
-def cli(args: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+def cli(args: list[object], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
     """Run ``sc2data ARGS``; (exit code, stdout, stderr)."""
-    try:
-        main([str(a) for a in args])
-        code = 0
-    except SystemExit as e:
-        code = int(e.code or 0)
-    out, err = capsys.readouterr()
-    return code, out, err
+    return run_cli([str(a) for a in args], capsys)
 
 
-def assert_one_line_error(code: int, err: str, match: str) -> None:
-    assert code == 2, err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("sc2data: error: "), err
-    assert match in lines[0], lines[0]
-    assert "Traceback" not in err
 
 
 @pytest.fixture(scope="module")

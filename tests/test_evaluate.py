@@ -10,7 +10,8 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from tests.mem_helpers import (assert_one_line_error, run_cli, tiny_pairset,  # noqa: E402
+from tests.cli import assert_one_line_error, run_cli
+from tests.mem_helpers import (tiny_pairset,  # noqa: E402
                          train_tiny)
 
 import sc2data.evaluate as ev  # noqa: E402

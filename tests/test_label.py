@@ -19,6 +19,7 @@ from sc2data.label import (LABELS_FILE, LOCK_FILE, PARTS_DIR, STACKS_FILE, Sourc
 from sc2data.registry import Registered, RuleError, load_registry, load_rules_dir
 from sc2data.rulebase import SCREEN_PX_PER_UNIT, blank_frame, paint_disk, set_field, stack
 from sc2data.schema import Schema, StackBatch
+from tests.cli import exit_code
 
 BUILTIN = load_registry()
 RULES = list(BUILTIN)
@@ -245,9 +246,8 @@ def test_bad_batch_size(tmp_path: Path) -> None:
 @pytest.fixture(scope="module")
 def rolled_out(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A small simulator dataset (3 episodes × 150 steps, 2 shards), made as a user makes one."""
-    pytest.importorskip("sc2data.rollout", reason="dataset storage is not in this build")
     out = tmp_path_factory.mktemp("rollout") / "data"
-    assert run_cli("rollout", "--out", str(out), "--episodes", "3", "--max-steps", "150",
+    assert exit_code("rollout", "--out", str(out), "--episodes", "3", "--max-steps", "150",
                    "--episodes-per-shard", "2", "--seed", "3", "--no-progress") == 0
     return out
 
@@ -257,15 +257,6 @@ def data(rolled_out: Path, tmp_path: Path) -> Path:
     return Path(shutil.copytree(rolled_out, tmp_path / "data"))
 
 
-def run_cli(*args: str) -> int:
-    """The console entry point, in-process, as a user runs it: its exit status."""
-    from sc2data.cli import main
-
-    try:
-        main(list(args))
-    except SystemExit as e:
-        return int(e.code or 0)
-    return 0
 
 
 def one_line_error(capsys: pytest.CaptureFixture[str]) -> str:
@@ -275,7 +266,7 @@ def one_line_error(capsys: pytest.CaptureFixture[str]) -> str:
 
 
 def test_cli_label_a_dataset(data: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    assert run_cli("label", str(data), "--no-progress", "--batch-size", "100") == 0
+    assert exit_code("label", str(data), "--no-progress", "--batch-size", "100") == 0
     out = capsys.readouterr().out
     assert "(null: no rule fired)" in out and "450 stacks labelled" in out
     labels = read_labels(data)
@@ -286,24 +277,23 @@ def test_cli_label_a_dataset(data: Path, capsys: pytest.CaptureFixture[str]) -> 
     wide = labels.stacks.to_pylist()
     fired = {(r["episode"], r["step"], r["rule_id"]) for r in labels.fired.to_pylist()}
     assert fired == {(r["episode"], r["step"], e.id) for r in wide for e in RULES if r[e.id]}
-    assert run_cli("label", str(data), "--no-progress") == 0
+    assert exit_code("label", str(data), "--no-progress") == 0
     assert "labels are up to date" in capsys.readouterr().out
-    assert run_cli("verify", str(data)) == 0  # the dataset is untouched by its labels
+    assert exit_code("verify", str(data)) == 0  # the dataset is untouched by its labels
 
 
 def test_cli_label_selects_rules(data: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    assert run_cli("label", str(data), "--no-progress", "--rules", "build_scv,train_marine",
+    assert exit_code("label", str(data), "--no-progress", "--rules", "build_scv,train_marine",
                    "--exclude", "train_marine") == 0
     assert [r["id"] for r in read_meta(data)["rules"]] == ["build_scv"]
-    assert run_cli("label", str(data), "--no-progress", "--rules", "build_cc") == 2
+    assert exit_code("label", str(data), "--no-progress", "--rules", "build_cc") == 2
     assert "unknown rule id 'build_cc'; known rules: build_scv, collect_minerals" in \
         one_line_error(capsys)
 
 
 def test_cli_label_refuses_a_folder_that_is_not_a_dataset(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    pytest.importorskip("sc2data.rollout", reason="dataset storage is not in this build")
-    assert run_cli("label", str(tmp_path), "--no-progress") == 2
+    assert exit_code("label", str(tmp_path), "--no-progress") == 2
     assert "is not an sc2data dataset" in one_line_error(capsys)
     assert list(tmp_path.iterdir()) == []
 
@@ -339,7 +329,7 @@ def test_cli_bad_rules_fail_in_one_line_leaving_nothing(
     folder = tmp_path / "my_rules"
     folder.mkdir()
     (folder / "bad.py").write_text(BAD_RULE.format(id=rule_id, requires=requires, body=body))
-    assert run_cli("label", str(data), "--rules-dir", str(folder), "--no-progress",
+    assert exit_code("label", str(data), "--rules-dir", str(folder), "--no-progress",
                    "--batch-size", "100") == 2
     assert re.search(message, one_line_error(capsys))
     assert nothing_written(data)
@@ -348,7 +338,7 @@ def test_cli_bad_rules_fail_in_one_line_leaving_nothing(
 def test_cli_label_resumes_after_interruption(data: Path, tmp_path: Path,
                                              monkeypatch: pytest.MonkeyPatch) -> None:
     clean = Path(shutil.copytree(data, tmp_path / "clean"))
-    assert run_cli("label", str(clean), "--no-progress") == 0
+    assert exit_code("label", str(clean), "--no-progress") == 0
 
     from sc2data.dataset import Dataset
 
@@ -361,10 +351,10 @@ def test_cli_label_resumes_after_interruption(data: Path, tmp_path: Path,
         return read(self, episodes, steps, keys)
 
     monkeypatch.setattr(Dataset, "read", flaky)
-    assert run_cli("label", str(data), "--no-progress") == 130  # Ctrl-C's exit status
+    assert exit_code("label", str(data), "--no-progress") == 130  # Ctrl-C's exit status
     assert nothing_written(data) and len(list((data / PARTS_DIR).glob("*.parquet"))) == 1
     monkeypatch.setattr(Dataset, "read", read)
-    assert run_cli("label", str(data), "--no-progress") == 0
+    assert exit_code("label", str(data), "--no-progress") == 0
     for name in (LABELS_FILE, STACKS_FILE):
         assert pq.read_table(data / name).equals(pq.read_table(clean / name))
     assert not (data / PARTS_DIR).exists()

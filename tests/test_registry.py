@@ -11,10 +11,10 @@ from pathlib import Path
 
 import pytest
 
-from sc2data.cli import main
 from sc2data.errors import Sc2DataError
 from sc2data.registry import RuleError, load_registry, load_rules_dir, parse_ids
 from sc2data.rulebase import blank_frame, set_field, stack
+from tests.cli import exit_code
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "sc2data-rule-example"
@@ -46,13 +46,6 @@ RULES = [MoreMinerals]
 """
 
 
-def run_cli(*args: str) -> int:
-    """The console entry point, in-process: its exit status."""
-    try:
-        main(list(args))
-    except SystemExit as e:
-        return int(e.code or 0)
-    return 0
 
 
 # -- discovery -------------------------------------------------------------------------------------
@@ -215,7 +208,7 @@ def test_entry_point_naming_one_rule_object(tmp_path: Path,
 
 def test_cli_rules_list(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     write_rule(tmp_path, "mine.py", GOOD.format(id="more_minerals"))
-    assert run_cli("rules", "list", "--rules-dir", str(tmp_path)) == 0
+    assert exit_code("rules", "list", "--rules-dir", str(tmp_path)) == 0
     out = capsys.readouterr().out.splitlines()
     assert out[0].split() == ["ID", "VERSION", "COMMAND", "SOURCE"]
     assert out[1].split()[:4] == ["build_scv", "1", "build", "an"]
@@ -227,14 +220,14 @@ def test_cli_rules_list(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> N
 def test_cli_bad_rule_is_one_line(capsys: pytest.CaptureFixture[str], tmp_path: Path,
                                   name: str) -> None:
     write_rule(tmp_path, f"{name}.py", BAD[name][0])
-    assert run_cli("rules", "list", "--rules-dir", str(tmp_path)) == 2
+    assert exit_code("rules", "list", "--rules-dir", str(tmp_path)) == 2
     err = capsys.readouterr().err
     assert err.startswith("sc2data: error: rule ") and err.count("\n") == 1
     assert issubclass(RuleError, Sc2DataError)
 
 
 def test_cli_rules_dir_missing(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
-    assert run_cli("rules", "list", "--rules-dir", str(tmp_path / "nope")) == 2
+    assert exit_code("rules", "list", "--rules-dir", str(tmp_path / "nope")) == 2
     assert "is not a folder" in capsys.readouterr().err
 
 

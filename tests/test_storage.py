@@ -150,6 +150,22 @@ def test_flipped_byte_is_caught_by_both_paths(tmp_path: Path) -> None:
         shard.close()
 
 
+def test_reading_a_damaged_chunk_raises(dataset: Path, tmp_path: Path) -> None:
+    """open_dataset's reads verify checksums too: the damaged chunk fails, the others read."""
+    import shutil
+
+    copy = Path(shutil.copytree(dataset, tmp_path / "d"))
+    flip_byte_in_chunk(copy / "shard-00000.h5", "screen/unit_hit_points", chunk=1)
+    ds = sc2data.open_dataset(copy, cache_bytes=0)
+    c = Codec().chunk_frames
+    with pytest.raises(ChecksumError, match=r"shard-00000.h5:screen/unit_hit_points: fletcher32"):
+        ds.read([0], [c])
+    with pytest.raises(Sc2DataError):
+        ds.read([0], [c + 1], keys=["screen/unit_hit_points"])
+    ds.read([0], [c], keys=["screen/unit_type", "player"])
+    ds.read([0, 1], [0, 5])
+
+
 def test_shard_of_another_schema_version_is_refused(tmp_path: Path) -> None:
     path = tmp_path / "s.h5"
     write_shard(path)
@@ -197,9 +213,11 @@ def test_add_observation_equals_add_frame_of_extract(tmp_path: Path) -> None:
             paths.append(path)
         assert paths[0].read_bytes() == paths[1].read_bytes()
     obs = render(scene, 0)
-    obs["feature_screen"][SCHEMA.screen[6].index, 0, 0] = 5000  # unit_type beyond its scale
+    obs["feature_screen"][SCHEMA.screen[6].index, 0, 0] = 70000  # unit_type beyond uint16
     w = ShardWriter(tmp_path / "bad.h5", SCHEMA, Codec(1, 4), {})
-    with pytest.raises(ValueError, match="screen/unit_type holds values outside"):
+    w.begin_episode(7, 0, 0)
+    with pytest.raises(Sc2DataError, match=r"frame 0 of episode 7: screen/unit_type holds values "
+                                           r"outside \[0, 65536\) \(min 0, max 70000\)"):
         w.add_observation(obs)
     with pytest.raises(ValueError, match="screen/unit_type holds values outside"):
         SCHEMA.extract(obs)
@@ -207,6 +225,21 @@ def test_add_observation_equals_add_frame_of_extract(tmp_path: Path) -> None:
     obs["feature_minimap"][SCHEMA.minimap[3].index, 5, 5] = -1  # camera: negative
     with pytest.raises(ValueError, match="minimap/camera holds values outside"):
         w.add_observation(obs)
+    w.abort()
+
+
+def test_counts_past_the_nominal_scale_are_kept(tmp_path: Path) -> None:
+    """pysc2 declares unit_density's scale as 16 but does not clip: 20 units on a pixel is a
+    real value, and it fits the layer's uint8, so it is stored, not refused."""
+    from sc2data.synthetic import _Scene, render
+
+    obs = render(_Scene(3), 0)
+    density = next(l for l in SCHEMA.screen if l.name == "unit_density")
+    obs["feature_screen"][density.index, 4, 4] = 20
+    assert SCHEMA.extract(obs)[density.key][4, 4] == 20
+    w = ShardWriter(tmp_path / "dense.h5", SCHEMA, Codec(1, 4), {})
+    w.begin_episode(0, 0, 0)
+    w.add_observation(obs)
     w.abort()
 
 

@@ -13,7 +13,8 @@ import pytest
 
 pytest.importorskip("torch")
 
-from tests.mem_helpers import (assert_one_line_error, run_cli, tiny_pairset,  # noqa: E402
+from tests.cli import assert_one_line_error, run_cli
+from tests.mem_helpers import (tiny_pairset,  # noqa: E402
                          train_tiny)
 
 import sc2data.loader as loader_mod  # noqa: E402

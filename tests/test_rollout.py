@@ -130,7 +130,7 @@ def test_bad_settings_are_refused_before_anything_is_written(tmp_path: Path) -> 
 
 
 KILL_RUN = ["rollout", "--env", "sim", "--agent", "reduced-random", "--episodes", "6",
-            "--episodes-per-shard", "1", "--max-steps", "300", "--seed", "11", "--no-progress"]
+            "--episodes-per-shard", "1", "--max-steps", "900", "--seed", "11", "--no-progress"]
 """The command the kill test runs: the real simulator and agent, through the CLI."""
 
 
@@ -151,14 +151,14 @@ def test_kill_9_then_rerun_equals_an_uninterrupted_run(tmp_path: Path) -> None:
     proc.wait()
     assert not (out / INDEX).exists() and (out / MANIFEST).exists()
     resumed = rollout(RolloutConfig(env="sim", agent="reduced-random", episodes=6,
-                                    episodes_per_shard=1, max_steps=300, seed=11), out,
+                                    episodes_per_shard=1, max_steps=900, seed=11), out,
                       progress=False)  # the same settings, in this process, with one worker
     assert resumed.shards_kept >= 1 and resumed.shards_written >= 1
     assert verify(out) == []
     main([*KILL_RUN, "--out", str(tmp_path / "clean")])
     assert shas(out) == shas(tmp_path / "clean")
     a, b = sc2data.open_dataset(out), sc2data.open_dataset(tmp_path / "clean")
-    e, t = np.repeat(np.arange(6), 3), np.tile([0, 150, 299], 6)
+    e, t = np.repeat(np.arange(6), 3), np.tile([0, 450, 899], 6)
     for k, v in a.read(e, t).arrays.items():
         np.testing.assert_array_equal(v, b.read(e, t).arrays[k])
 
@@ -168,14 +168,18 @@ def test_ctrl_c_stops_cleanly_and_the_rerun_finishes(tmp_path: Path) -> None:
     """Ctrl-C (SIGINT to the whole process group, as a terminal sends it) on a two-worker run:
     exit 130 with a one-line hint, no partial shard left, and the same command finishes."""
     out = tmp_path / "out"
+    # Longer episodes than the kill test's: on a quiet machine short ones finish within moments
+    # of the first partial appearing, and the signal would find the run already done.
+    run = [a if a != "900" else "1500" for a in KILL_RUN]
     sc2data_cli = Path(sys.executable).with_name("sc2data")
-    cmd = [sc2data_cli, *KILL_RUN, "--workers", "2", "--out", out]
+    cmd = [sc2data_cli, *run, "--workers", "2", "--out", out]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             text=True, start_new_session=True)
     deadline = time.monotonic() + 120
     while not list(out.glob("shard-*.partial")) and proc.poll() is None:
         assert time.monotonic() < deadline, "the rollout started no shard in time"
         time.sleep(0.02)
+    assert proc.poll() is None, "the run ended before it could be interrupted"
     os.killpg(proc.pid, signal.SIGINT)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
@@ -183,5 +187,5 @@ def test_ctrl_c_stops_cleanly_and_the_rerun_finishes(tmp_path: Path) -> None:
                                             "resume")
     assert "Traceback" not in err
     assert not list(out.glob("*.partial")) and not (out / INDEX).exists()
-    main([*KILL_RUN, "--out", str(out)])  # the same command, with one worker
+    main([*run, "--out", str(out)])  # the same command, with one worker
     assert verify(out) == []

@@ -173,8 +173,11 @@ def test_ctrl_c_stops_cleanly_and_the_rerun_finishes(tmp_path: Path) -> None:
     run = [a if a != "900" else "1500" for a in KILL_RUN]
     sc2data_cli = Path(sys.executable).with_name("sc2data")
     cmd = [sc2data_cli, *run, "--workers", "2", "--out", out]
+    # A terminal's Ctrl-C reaches a process that handles SIGINT; where this test itself runs with
+    # SIGINT ignored (a background job of a non-interactive shell), the child would inherit that.
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True)
+                            text=True, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 120
     while not list(out.glob("shard-*.partial")) and proc.poll() is None:
         assert time.monotonic() < deadline, "the rollout started no shard in time"

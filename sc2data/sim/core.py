@@ -20,6 +20,7 @@ only fight what they are ordered to and never acquire targets on their own.
 
 from __future__ import annotations
 
+import abc
 import collections
 import heapq
 import math
@@ -50,7 +51,7 @@ from sc2data.sim.store import (
 )
 
 
-class GameCore:
+class GameCore(abc.ABC):
     """All game state of one BuildMarines episode, advanced by :meth:`advance`."""
 
     def __init__(self, seed: int | None = None) -> None:
@@ -390,42 +391,55 @@ class GameCore:
 
     # ------------------------------------------------------------------ rules (subclasses)
 
+    @abc.abstractmethod
     def order_gather(self, u: Unit, patch: Unit | None, t: float, emit: bool = True) -> int:
         raise NotImplementedError
 
+    @abc.abstractmethod
     def _patch_at(self, x: float, y: float) -> Unit | None:
         raise NotImplementedError
 
+    @abc.abstractmethod
     def _to_patch(self, u: Unit, t: float) -> None:
         raise NotImplementedError
 
+    @abc.abstractmethod
     def _start_harvest(self, u: Unit, p: Unit, t: float) -> None:
         raise NotImplementedError
 
+    @abc.abstractmethod
     def _next_harvester(self, p: Unit, t: float) -> None:
         raise NotImplementedError
 
+    @abc.abstractmethod
     def _harvest_done(self, u: Unit, t: float) -> None:
         raise NotImplementedError
 
+    @abc.abstractmethod
     def _deliver(self, u: Unit, t: float) -> None:
         raise NotImplementedError
 
+    @abc.abstractmethod
     def _place(self, u: Unit, t: float) -> None:
         raise NotImplementedError
 
+    @abc.abstractmethod
     def _pause_construction(self, b: Unit, t: float) -> None:
         raise NotImplementedError
 
+    @abc.abstractmethod
     def _build_done(self, b: Unit, t: float) -> None:
         raise NotImplementedError
 
+    @abc.abstractmethod
     def _produce_done(self, b: Unit, t: float) -> None:
         raise NotImplementedError
 
+    @abc.abstractmethod
     def _attack_update(self, u: Unit, t: float) -> None:
         raise NotImplementedError
 
+    @abc.abstractmethod
     def _fire(self, u: Unit, t: float) -> None:
         raise NotImplementedError
 

@@ -27,10 +27,17 @@ class Combat(GameCore):
     def _reach(self, u: Unit, v: Unit) -> float:
         return md.MARINE_RANGE + u.data.radius + v.data.radius
 
-    def _attack_update(self, u: Unit, t: float) -> None:
+    def _live_target(self, u: Unit, t: float) -> Unit | None:
+        """``u``'s target if it still lives; otherwise ``u`` goes idle and None is returned."""
         v = u.target
         if v is None or not v.alive:
             self.order_idle(u, t)
+            return None
+        return v
+
+    def _attack_update(self, u: Unit, t: float) -> None:
+        v = self._live_target(u, t)
+        if v is None:
             return
         ux, uy = u.pos(t)
         vx, vy = v.pos(t)
@@ -46,9 +53,8 @@ class Combat(GameCore):
         self._at(min(arrive, t + CHASE_RECHECK) if moving else arrive, RECHECK, u)
 
     def _fire(self, u: Unit, t: float) -> None:
-        v = u.target
-        if v is None or not v.alive:
-            self.order_idle(u, t)
+        v = self._live_target(u, t)
+        if v is None:
             return
         ux, uy = u.pos(t)
         vx, vy = v.pos(t)

@@ -12,11 +12,12 @@ only does what is left.
 
 from __future__ import annotations
 
+import contextlib
 import os
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from sc2data.recipe import Recipe
 
@@ -40,27 +41,47 @@ class BuildReport:
 
 
 def build(recipe: Recipe, out: str | os.PathLike[str], *, workers: int = 1,
-          progress: bool | None = None) -> BuildReport:
-    """Run every stage of ``recipe`` into ``out``; stages already complete are kept."""
+          progress: bool | None = None, ray: Any = None) -> BuildReport:
+    """Run every stage of ``recipe`` into ``out``; stages already complete are kept.
+
+    ``ray`` (:class:`sc2data.scaleout.RayOptions`): roll out and label as Ray tasks, on one Ray
+    instance or cluster for both stages; the data is the same either way.
+    """
     from sc2data.label import label_dataset
     from sc2data.pairset import make_pairset
-    from sc2data.rollout import RolloutConfig, rollout
+    from sc2data.rollout import RolloutConfig, check_folder, rollout
 
     out = Path(out)
     report = BuildReport(out)
     data = out / ROLLOUT_DIR
+    config = RolloutConfig.from_recipe(recipe)
+    with contextlib.ExitStack() as stack:
+        if ray is not None:
+            from sc2data.scaleout import connect, label_on_ray, rollout_on_ray
 
-    t = time.perf_counter()
-    r = rollout(RolloutConfig.from_recipe(recipe), data, workers=workers, progress=progress)
-    report.seconds["rollout"] = time.perf_counter() - t
-    report.lines.append(f"rollout: {r.episodes} episodes, {r.steps:,} stacks "
-                        f"({r.shards_written} shards written, {r.shards_kept} kept)")
+            config.validate()
+            check_folder(config, data)  # before Ray starts for nothing
+            stack.enter_context(connect(ray))
 
-    t = time.perf_counter()
-    labels = label_dataset(data, include=list(recipe.rule_ids),
-                           progress=sys.stderr.isatty() if progress is None else progress)
-    report.seconds["label"] = time.perf_counter() - t
-    report.lines.append(labels.table())
+        t = time.perf_counter()
+        if ray is None:
+            r = rollout(config, data, workers=workers, progress=progress)
+        else:
+            r, retries = rollout_on_ray(config, data, ray, progress=progress)
+            report.lines += retries.lines() if retries.tasks else []
+        report.seconds["rollout"] = time.perf_counter() - t
+        report.lines.append(f"rollout: {r.episodes} episodes, {r.steps:,} stacks "
+                            f"({r.shards_written} shards written, {r.shards_kept} kept)")
+
+        t = time.perf_counter()
+        if ray is None:
+            labels = label_dataset(data, include=list(recipe.rule_ids), progress=progress)
+        else:
+            labels, retries = label_on_ray(data, ray, include=list(recipe.rule_ids),
+                                           progress=progress)
+            report.lines += retries.lines() if retries.tasks else []
+        report.seconds["label"] = time.perf_counter() - t
+        report.lines.append(labels.table())
 
     t = time.perf_counter()
     pairs = make_pairset(recipe, data, out / PAIRS_DIR, progress=progress)

@@ -106,7 +106,8 @@ def label(
                                           "leave out."),
     rules_dir: Optional[Path] = typer.Option(None, "--rules-dir", help=_RULES_DIR_HELP),
     batch_size: int = typer.Option(256, "--batch-size", help="Stacks per rule call."),
-    progress: bool = typer.Option(True, "--progress/--no-progress", help="Show a progress bar."),
+    progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",
+                                            help="Progress bar (default: on a terminal)."),
     ray: Optional[str] = _ray_option(),
     ray_retries: int = _ray_retries(),
     ray_timeout: float = _ray_timeout(),
@@ -232,16 +233,25 @@ def pair(
 def build(
     recipe: Path = typer.Argument(..., help="Recipe (manifests/*.toml)."),
     out: Path = typer.Option(..., "--out", help="Build folder (created; rerun to resume)."),
-    workers: int = typer.Option(2, help="Rollout worker processes (the data does not depend "
-                                        "on it)."),
+    workers: Optional[int] = typer.Option(None, help="Rollout worker processes [default: 2]; "
+                                                     "with --ray, tasks at once [default: all "
+                                                     "CPUs]. The data does not depend on it."),
     progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",
                                             help="Progress bars (default: on a terminal)."),
+    ray: Optional[str] = _ray_option(),
+    ray_retries: int = _ray_retries(),
+    ray_timeout: float = _ray_timeout(),
+    ray_memory: Optional[int] = _ray_memory(),
 ) -> None:
     """Run a recipe end to end: rollout → label → pair, resuming whatever is already done."""
     from sc2data.build import PAIRS_DIR, build as run
     from sc2data.recipe import load
 
-    report = run(load(recipe), out, workers=workers, progress=progress)
+    r = load(recipe)
+    options = None if ray is None else _ray_options(ray, ray_retries, ray_timeout, ray_memory,
+                                                      workers)
+    report = run(r, out, workers=2 if workers is None else workers, progress=progress,
+                 ray=options)
     for line in report.lines:
         typer.echo(line)
     typer.echo(report.table())

@@ -218,7 +218,7 @@ def write_part(unit: Unit, rules: Sequence[Registered], keys: Sequence[str], bat
 
 
 def label(source: Source, rules: Sequence[Registered], out_dir: Path | str, *,
-          batch_size: int = DEFAULT_BATCH, progress: bool = True,
+          batch_size: int = DEFAULT_BATCH, progress: bool | None = None,
           run_units: UnitRunner | None = None) -> LabelSummary:
     """Label every unit of ``source`` with ``rules`` into ``out_dir``; resumes finished units.
 
@@ -259,9 +259,8 @@ def _lock(out: Path) -> Iterator[None]:
 
 
 def _run(source: Source, rules: Sequence[Registered], out: Path, fp: str, batch_size: int,
-         progress: bool, run_units: UnitRunner | None = None) -> LabelSummary:
-    from tqdm import tqdm
-
+         progress: bool | None, run_units: UnitRunner | None = None) -> LabelSummary:
+    from sc2data.progress import bar as progress_bar
     from sc2data.provenance import versions
 
     keys = required_keys(rules, source.schema)
@@ -281,8 +280,7 @@ def _run(source: Source, rules: Sequence[Registered], out: Path, fp: str, batch_
         raise Sc2DataError("the dataset's shards do not have unique keys; cannot label it")
     finished = {n for n in names if (parts / n).is_file()}
     total = sum(u.stacks for u in source.units)
-    with tqdm(total=total, unit="stack", unit_scale=True, desc="label", disable=not progress,
-              dynamic_ncols=True) as bar:
+    with progress_bar(total, desc="label", unit="stack", show=progress) as bar:
         bar.update(sum(u.stacks for u, n in zip(source.units, names) if n in finished))
         todo = [(u, parts / n) for u, n in zip(source.units, names) if n not in finished]
         if run_units is not None:
@@ -434,7 +432,7 @@ def dataset_source(path: Path | str) -> Source:
 
 def label_dataset(data: Path | str, *, include: Sequence[str] | None = None,
                   exclude: Sequence[str] = (), rules_dir: Path | str | None = None,
-                  batch_size: int = DEFAULT_BATCH, progress: bool = True,
+                  batch_size: int = DEFAULT_BATCH, progress: bool | None = None,
                   run_units: UnitRunner | None = None) -> LabelSummary:
     """``sc2data label``: load and select rules, open the dataset, label it into its folder."""
     from sc2data.registry import load_registry

@@ -22,7 +22,7 @@ import numpy as np
 import pyarrow as pa
 
 from sc2data.errors import Sc2DataError
-from sc2data.recipe import SPLITS, Recipe
+from sc2data.recipe import SPLITS, Recipe, apportion
 
 PAIR_SCHEMA = pa.schema([
     ("split", pa.string()), ("episode", pa.int64()), ("step", pa.int32()),
@@ -48,15 +48,6 @@ class Labelled:
         n = len(self.episode)
         if len(self.step) != n or self.fires.shape[0] != n:
             raise ValueError("episode, step and fires must have the same length")
-
-
-def apportion(total: int, fractions: Sequence[float]) -> list[int]:
-    """Split ``total`` into integers proportional to ``fractions`` (largest remainder)."""
-    raw = np.asarray(fractions, dtype=np.float64) * total
-    counts = np.floor(raw).astype(np.int64)
-    order = np.argsort(-(raw - counts), kind="stable")
-    counts[order[: total - int(counts.sum())]] += 1
-    return [int(c) for c in counts]
 
 
 def _assign_episodes(episodes: np.ndarray, fractions: Sequence[float],

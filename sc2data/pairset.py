@@ -139,9 +139,8 @@ def _pack_split(ds: Any, split: str, pairs: pa.Table, path: Path, seed: int,
 def make_pairset(recipe: Recipe, data: str | os.PathLike[str], out: str | os.PathLike[str], *,
                  progress: bool | None = None) -> PairsetSummary:
     """Build the recipe's pair set from the labelled dataset ``data`` into the folder ``out``."""
-    from tqdm import tqdm
-
     from sc2data.dataset import open_dataset
+    from sc2data.progress import bar as progress_bar
 
     started = time.perf_counter()
     data, out = Path(data), Path(out)
@@ -164,8 +163,7 @@ def make_pairset(recipe: Recipe, data: str | os.PathLike[str], out: str | os.Pat
         parts, states = [], {}
         n_states = len(np.unique(pc.add(pc.multiply(pairs["episode"], 1 << 20),
                                         pc.cast(pairs["step"], pa.int64())).to_numpy()))
-        with tqdm(total=n_states, unit="stack", desc="pack", disable=progress is False,
-                  dynamic_ncols=True) as bar:
+        with progress_bar(n_states, desc="pack", unit="stack", show=progress) as bar:
             for split in SPLITS:
                 sub = pairs.filter(pc.equal(pairs["split"], split))
                 part, states[split] = _pack_split(ds, split, sub, tmp / "packed" / f"{split}.h5",

@@ -30,8 +30,9 @@ wrong type or an impossible count is an error that names the field. Example (the
 
 from __future__ import annotations
 
+import math
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -193,10 +194,35 @@ def parse(data: Mapping[str, Any], source: str = "<recipe>") -> Recipe:
                           f"got {', '.join(f'{f:g}' for f in fractions)}")
     total = sum(fractions)
     split = SplitSpec(method, tuple(f / total for f in fractions))  # type: ignore[arg-type]
+    for name, n in zip(SPLITS, pairs_per_split(pairs, len(commands), split), strict=True):
+        if n == 0:
+            raise RecipeError(f"{w} [pairs]: these counts leave the {name} split without pairs; "
+                              f"raise states_per_command or null_states")
 
     return Recipe(name=data["name"], seed=data["seed"], rollout=rollout, commands=tuple(commands),
                   pairs=pairs, split=split, description=data.get("description", ""),
                   source=source)
+
+
+def apportion(total: int, fractions: Sequence[float]) -> list[int]:
+    """Split ``total`` into integers proportional to ``fractions`` (largest remainder)."""
+    raw = [f * total for f in fractions]
+    counts = [math.floor(r) for r in raw]
+    order = sorted(range(len(raw)), key=lambda i: -(raw[i] - counts[i]))  # stable
+    for i in order[: total - sum(counts)]:
+        counts[i] += 1
+    return counts
+
+
+def pairs_per_split(pairs: PairSpec, n_commands: int, split: SplitSpec) -> list[int]:
+    """How many pairs each split gets: a matched and a mismatched pair per command state, and
+    the null pairs; per split for an episode split, apportioned afterwards for a random one."""
+    if split.method == "random":
+        return apportion(2 * n_commands * pairs.states_per_command + pairs.null_states,
+                         split.fractions)
+    per_command = apportion(pairs.states_per_command, split.fractions)
+    null = apportion(pairs.null_states, split.fractions)
+    return [2 * n_commands * c + z for c, z in zip(per_command, null, strict=True)]
 
 
 def load(path: str | Path) -> Recipe:

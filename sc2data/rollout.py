@@ -28,6 +28,7 @@ from sc2data.chunks import Codec
 from sc2data.dataset import (DATASET_FORMAT, DATASET_FORMAT_VERSION, MANIFEST, PARTIAL,
                              read_manifest, shard_name, write_index, write_manifest)
 from sc2data.errors import Sc2DataError
+from sc2data.progress import bar as progress_bar
 from sc2data.provenance import versions
 from sc2data.schema import Schema
 from sc2data.storage import Shard, ShardWriter, fsync_path, sha256_file
@@ -290,13 +291,6 @@ def prepare_folder(config: RolloutConfig, out: Path) -> list[int]:
     return todo
 
 
-def _progress(total: int, show: bool | None) -> Any:
-    from tqdm import tqdm
-
-    return tqdm(total=total, unit="step", unit_scale=True, dynamic_ncols=True, smoothing=0.1,
-                disable=None if show is None else not show, desc="rollout")
-
-
 def _fail_fast(config: RolloutConfig, env_factory: EnvFactory,
                agent_factory: AgentFactory) -> None:
     """Make an agent (and a simulator) once here, so that a broken setup fails before any
@@ -359,7 +353,7 @@ def rollout(config: RolloutConfig, out: str | os.PathLike[str], workers: int = 1
         lock.share()
         per_episode = config.max_steps or envs.EPISODE_STEPS
         total = sum(len(config.shard_episodes(i)) for i in todo) * per_episode
-        with _progress(total, progress) as bar:
+        with progress_bar(total, desc="rollout", unit="step", show=progress) as bar:
             job = functools.partial(write_shard, config, out, env_factory, agent_factory)
             if runner is not None:
                 written = runner(config, out, todo, env_factory, agent_factory, bar)

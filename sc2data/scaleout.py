@@ -393,7 +393,7 @@ class RayUnits:
 def label_on_ray(data: str | os.PathLike[str], options: RayOptions, *,
                  include: Sequence[str] | None = None, exclude: Sequence[str] = (),
                  rules_dir: Path | str | None = None, batch_size: int = 256,
-                 progress: bool = True) -> tuple[Any, ScaleoutReport]:
+                 progress: bool | None = None) -> tuple[Any, ScaleoutReport]:
     """``sc2data label --ray``: :func:`sc2data.label.label_dataset` with units as Ray tasks."""
     from sc2data.label import label_dataset
 

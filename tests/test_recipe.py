@@ -68,6 +68,8 @@ def test_parse_reads_every_field() -> None:
     ("commands.build_scv.paraphrases", [""], "paraphrases must be a list of non-empty strings"),
     ("commands", {"build_scv": {"text": "x"}}, "at least two commands"),
     ("seed", ..., "missing required key 'seed'"),
+    ("pairs", {"states_per_command": 1, "null_states": 0},
+     "[pairs]: these counts leave the val split without pairs"),
 ])
 def test_malformed_recipe_names_the_field(path: str, value: Any, message: str) -> None:
     with pytest.raises(RecipeError, match=None) as e:
@@ -75,6 +77,14 @@ def test_malformed_recipe_names_the_field(path: str, value: Any, message: str) -
     assert message in str(e.value)
     assert str(e.value).startswith("r.toml")
     assert "\n" not in str(e.value)
+
+
+def test_random_split_apportions_pairs_after_drawing() -> None:
+    """One state per command and no null: 4 pairs, too few for a 3-way episode split, enough
+    for a random one (2 / 1 / 1)."""
+    d = with_("pairs", {"states_per_command": 1, "null_states": 0})
+    d["split"]["method"] = "random"
+    assert parse(d).pairs.states_per_command == 1
 
 
 def test_load_reports_bad_toml_and_missing_file(tmp_path: Path) -> None:

@@ -278,3 +278,51 @@ def test_bad_ray_options_fail_in_one_line(args: list[str], match: str, tmp_path:
     code, _, err = run_cli(["rollout", "--out", tmp_path / "out", *args], capsys)
     assert_one_line_error(code, err, f"sc2data: error: {match}")
     assert not (tmp_path / "out").exists()
+
+
+TINY_RECIPE = """
+name = "tiny"
+seed = 3
+
+[rollout]
+env = "sim"
+agent = "reduced-random"
+episodes = 3
+
+[commands.build_scv]
+text = "build an SCV"
+
+[commands.collect_minerals]
+text = "collect minerals"
+
+[pairs]
+states_per_command = 2
+null_states = 6
+"""
+
+
+@pytest.mark.slow
+def test_build_on_ray_equals_a_local_build(ray_instance: Any, tmp_path: Path,
+                                           monkeypatch: pytest.MonkeyPatch,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """``sc2data build --ray``: rollout and label as Ray tasks, the same data and pairs as a
+    local build (episodes cut to 400 steps to keep the test short)."""
+    recipe = tmp_path / "tiny.toml"
+    recipe.write_text(TINY_RECIPE)
+    from_recipe = RolloutConfig.from_recipe.__func__  # type: ignore[attr-defined]
+    monkeypatch.setattr(RolloutConfig, "from_recipe", classmethod(
+        lambda cls, r, **kw: from_recipe(cls, r, **kw, max_steps=400)))
+    outs = {}
+    for name, extra in (("local", []), ("ray", ["--ray"])):
+        outs[name] = tmp_path / name
+        code, out, err = run_cli(["build", recipe, "--out", outs[name], "--no-progress", *extra],
+                                 capsys)
+        assert code == 0, err
+        assert "rollout: 3 episodes, 1,200 stacks (1 shards written, 0 kept)" in out
+    assert out.count("ray: 1 tasks, none retried") == 2  # the rollout's shard, the label's unit
+    local, remote = (pq.read_table(o / "pairs" / "pairs.parquet") for o in outs.values())
+    assert remote.equals(local) and remote.num_rows == 2 * 2 * 2 + 6
+    for name in (INDEX, STACKS_FILE):
+        a, b = (pq.read_table(o / "rollout" / name).replace_schema_metadata(None)
+                for o in outs.values())
+        assert a.equals(b), name

@@ -1,0 +1,41 @@
+"""Progress bars: tqdm's live bar on a terminal, a plain line now and then in a log file."""
+
+from __future__ import annotations
+
+import sys
+from typing import Any, TextIO
+
+LOG_EVERY_S = 60.0
+"""With stderr redirected to a file, a progress line every this many seconds, and none at all
+for work that ends sooner (so short commands and one-line errors stay clean)."""
+
+
+class _Lines:
+    """A stream for tqdm that writes each redraw as a whole line instead of a carriage return."""
+
+    def __init__(self, stream: TextIO) -> None:
+        self.stream = stream
+
+    def write(self, text: str) -> None:
+        text = text.replace("\r", "").strip()
+        if text:
+            self.stream.write(text + "\n")
+
+    def flush(self) -> None:
+        self.stream.flush()
+
+
+def bar(total: int, *, desc: str, unit: str, show: bool | None) -> Any:
+    """A tqdm progress bar over ``total`` units.
+
+    ``show``: True, a live bar; False, none; None, a live bar when stderr is a terminal and, when
+    it is a file (``sc2data build … 2> log``), one line every :data:`LOG_EVERY_S` seconds once
+    the work has lasted that long.
+    """
+    from tqdm import tqdm
+
+    if show is None and not sys.stderr.isatty():
+        return tqdm(total=total, desc=desc, unit=unit, unit_scale=True, ascii=True, ncols=100,
+                    file=_Lines(sys.stderr), mininterval=LOG_EVERY_S, delay=LOG_EVERY_S)
+    return tqdm(total=total, desc=desc, unit=unit, unit_scale=True, dynamic_ncols=True,
+                smoothing=0.1, disable=show is False)

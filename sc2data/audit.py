@@ -18,7 +18,7 @@ import numpy as np
 from sc2data._pysc2 import actions
 from sc2data.dataset import (INDEX, MANIFEST, PARTIAL, manifest_schema, read_index, read_manifest)
 from sc2data.errors import Sc2DataError
-from sc2data.storage import EPISODE_COLUMNS, Shard, sha256_file
+from sc2data.storage import CHUNK_INDEX, EPISODE_COLUMNS, Shard, chunk_table, sha256_file
 
 _BLOCK = 1024
 """Frames read per call while verifying."""
@@ -123,6 +123,7 @@ def _check_shard(path: Path, rows: dict[str, Any], manifest: dict[str, Any],
             faults.append(f"{path.name}: episode frame offsets are not contiguous")
         for key in shard.schema.keys():
             faults += _check_dataset(shard, f"frames/{key}", n_frames)
+        faults += _check_chunk_index(shard)
         for key in ("function", "args", "reward"):
             faults += _check_dataset(shard, f"steps/{key}", n_steps)
         if not faults:
@@ -134,6 +135,20 @@ def _check_shard(path: Path, rows: dict[str, Any], manifest: dict[str, Any],
     finally:
         shard.close()
     return faults
+
+
+def _check_chunk_index(shard: Shard) -> list[str]:
+    """The stored chunk index (shards written before it existed have none) says what HDF5's
+    own chunk index says, for every frame dataset."""
+    try:
+        stored = shard.chunk_index()
+    except Sc2DataError as e:
+        return [str(e)]
+    for key, table in stored.items():
+        if not np.array_equal(table, chunk_table(shard.file[f"frames/{key}"])):
+            return [f"{shard.path.name}:{CHUNK_INDEX}: disagrees with HDF5's chunk index of "
+                    f"frames/{key}"]
+    return []
 
 
 def _check_dataset(shard: Shard, name: str, length: int) -> list[str]:

@@ -75,7 +75,8 @@ def build(recipe: Recipe, out: str | os.PathLike[str], *, workers: int = 1,
 
         t = time.perf_counter()
         if ray is None:
-            labels = label_dataset(data, include=list(recipe.rule_ids), progress=progress)
+            labels = label_dataset(data, include=list(recipe.rule_ids), progress=progress,
+                                   workers=workers)
         else:
             labels, retries = label_on_ray(data, ray, include=list(recipe.rule_ids),
                                            progress=progress)

@@ -106,6 +106,8 @@ def label(
                                           "leave out."),
     rules_dir: Optional[Path] = typer.Option(None, "--rules-dir", help=_RULES_DIR_HELP),
     batch_size: int = typer.Option(256, "--batch-size", help="Stacks per rule call."),
+    workers: int = typer.Option(1, "--workers", help="Processes labelling shards at once "
+                                                     "(the labels do not depend on it)."),
     progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",
                                             help="Progress bar (default: on a terminal)."),
     ray: Optional[str] = _ray_option(),
@@ -127,7 +129,7 @@ def label(
         summary, report = label_on_ray(data, options, **selection)
         lines = report.lines() if report.tasks else []
     else:
-        summary = label_dataset(data, **selection)
+        summary = label_dataset(data, workers=workers, **selection)
     if summary.up_to_date:
         typer.echo("labels are up to date (same rules, same data)")
     typer.echo(summary.table())
@@ -233,7 +235,7 @@ def pair(
 def build(
     recipe: Path = typer.Argument(..., help="Recipe (manifests/*.toml)."),
     out: Path = typer.Option(..., "--out", help="Build folder (created; rerun to resume)."),
-    workers: Optional[int] = typer.Option(None, help="Rollout worker processes [default: 2]; "
+    workers: Optional[int] = typer.Option(None, help="Rollout and label processes [default: 2]; "
                                                      "with --ray, tasks at once [default: all "
                                                      "CPUs]. The data does not depend on it."),
     progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",

@@ -22,11 +22,13 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import functools
 import hashlib
 import json
 import os
 import re
 import shutil
+import socket
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -386,6 +388,61 @@ def read_labels(folder: Path | str) -> Labels:
     return Labels(pq.read_table(Path(folder) / LABELS_FILE), stacks, meta)
 
 
+# -- labelling units in other processes ----------------------------------------------------------
+@functools.lru_cache(maxsize=4)
+def _rules_and_source(data: str, selection: tuple[Any, Any, Any]
+                      ) -> tuple[Sequence[Registered], Source]:
+    from sc2data.registry import load_registry
+
+    include, exclude, rules_dir = selection
+    return load_registry(rules_dir).select(include, exclude), dataset_source(data)
+
+
+def label_unit(data: str, selection: tuple[Any, Any, Any], unit_key: str, part: str,
+               keys: Sequence[str], batch_size: int, report: Callable[[int], None]) -> None:
+    """Label unit ``unit_key`` of the dataset at ``data`` into ``part``, away from the process
+    that runs :func:`label` (a worker process, a Ray task): the rules are loaded from
+    ``selection`` = (include, exclude, rules_dir) and checked to be the run's (its parts
+    folder's ``state.json``), then the unit is written with :func:`write_part`."""
+    include, exclude, rules_dir = selection
+    rules, source = _rules_and_source(data, (None if include is None else tuple(include),
+                                             tuple(exclude), rules_dir))
+    state = json.loads((Path(part).parent / "state.json").read_text())
+    if fingerprint(rules, source.info) != state.get("fingerprint"):
+        raise Sc2DataError(f"{socket.gethostname()} sees other rules or other data than the run "
+                           f"that started this label; install the same sc2data and rule "
+                           f"plugins on every node and share the dataset folder")
+    unit = next(u for u in source.units if u.key == unit_key)
+    write_part(unit, rules, keys, batch_size, Path(part), on_batch=report)
+
+
+def _unit_job(data: str, selection: tuple[Any, Any, Any], units: Sequence[tuple[str, str]],
+              keys: Sequence[str], batch_size: int, i: int, report: Callable[[int], None]
+              ) -> None:
+    label_unit(data, selection, units[i][0], units[i][1], keys, batch_size, report)
+
+
+@dataclass(frozen=True)
+class LocalUnits:
+    """A unit runner: label units in ``workers`` local processes (as rollout's workers run)."""
+
+    workers: int
+    data: Path
+    selection: tuple[Any, Any, Any]
+
+    def __call__(self, todo: Sequence[tuple[Unit, Path]], keys: Sequence[str], batch_size: int,
+                 bar: Any) -> None:
+        from sc2data.workers import run_parallel
+
+        if not todo:
+            return
+        units = [(unit.key, str(path)) for unit, path in todo]
+        job = functools.partial(_unit_job, str(Path(self.data).resolve()), self.selection, units,
+                                tuple(keys), batch_size)
+        run_parallel(job, list(range(len(units))), self.workers, todo[0][1].parent, bar.update,
+                     lambda i: units[i][0].split(":")[0], what="label")
+
+
 # -- the dataset door ------------------------------------------------------------------------------
 
 def dataset_source(path: Path | str) -> Source:
@@ -433,10 +490,17 @@ def dataset_source(path: Path | str) -> Source:
 def label_dataset(data: Path | str, *, include: Sequence[str] | None = None,
                   exclude: Sequence[str] = (), rules_dir: Path | str | None = None,
                   batch_size: int = DEFAULT_BATCH, progress: bool | None = None,
-                  run_units: UnitRunner | None = None) -> LabelSummary:
-    """``sc2data label``: load and select rules, open the dataset, label it into its folder."""
+                  workers: int = 1, run_units: UnitRunner | None = None) -> LabelSummary:
+    """``sc2data label``: load and select rules, open the dataset, label it into its folder,
+    in ``workers`` processes (one shard at a time each) or through ``run_units``."""
     from sc2data.registry import load_registry
 
+    if workers < 1:
+        raise Sc2DataError(f"workers must be at least 1, not {workers}")
     rules = load_registry(rules_dir).select(include, exclude)
+    if run_units is None and workers > 1:
+        selection = (None if include is None else tuple(include), tuple(exclude),
+                     None if rules_dir is None else str(Path(rules_dir).resolve()))
+        run_units = LocalUnits(workers, Path(data), selection)
     return label(dataset_source(data), rules, data, batch_size=batch_size, progress=progress,
                  run_units=run_units)

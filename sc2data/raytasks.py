@@ -10,7 +10,6 @@ game.
 
 from __future__ import annotations
 
-import json
 import os
 import resource
 import shutil
@@ -118,22 +117,12 @@ def rollout_task(config: Any, out: str, i: int, env_factory: Any, agent_factory:
 
 
 def label_task(data: str, selection: tuple[Any, Any, Any], unit_key: str, part: str,
-                keys: Sequence[str], batch_size: int, tracker: Any) -> dict[str, float]:
+               keys: Sequence[str], batch_size: int, tracker: Any) -> dict[str, float]:
     """One label unit, checked to use the driver's rules on the driver's data."""
-    from sc2data.label import dataset_source, fingerprint, write_part
-    from sc2data.registry import load_registry
+    from sc2data.label import label_unit
 
     def work(report: Reporter) -> None:
-        include, exclude, rules_dir = selection
-        rules = load_registry(rules_dir).select(include, exclude)
-        source = dataset_source(data)
-        state = json.loads((Path(part).parent / "state.json").read_text())
-        if fingerprint(rules, source.info) != state.get("fingerprint"):
-            raise Sc2DataError(f"node {socket.gethostname()} sees other rules or other data "
-                               f"than the driver; install the same sc2data and rule plugins "
-                               f"on every node and share the dataset folder")
-        unit = next(u for u in source.units if u.key == unit_key)
-        write_part(unit, rules, keys, batch_size, Path(part), on_batch=report)
+        label_unit(data, selection, unit_key, part, keys, batch_size, report)
 
     return _attempt(tracker, unit_key.split(":")[0], work)
 

@@ -9,6 +9,9 @@ Layout, all derived from a :class:`~sc2data.schema.Schema`::
     /steps/reward      (S,)    the reward the step returned
     /episodes/<column> (E,)    episode, env_seed, agent_seed, frame_start, step_start, n_steps,
                                reward
+    /chunk_index       (K, C, 3) file offset, stored size and filter mask of chunk c of frame
+                               dataset k (keys in schema order): what HDF5's chunk index says,
+                               kept so that a reader need not walk it (~9 ms per dataset)
 
 Stack ``t`` of an episode is frames ``frame_start + t`` and ``frame_start + t + 1`` with step
 ``step_start + t``. Every dataset is chunked, Zstd-compressed and fletcher32-checksummed
@@ -43,6 +46,23 @@ EPISODE_COLUMNS: tuple[str, ...] = ("episode", "env_seed", "agent_seed", "frame_
                                     "step_start", "n_steps", "reward")
 _GROW = 256
 """Chunks added at a time when a frame dataset must grow."""
+CHUNK_INDEX = "chunk_index"
+
+
+def chunk_table(ds: h5py.Dataset) -> np.ndarray:
+    """``(chunks, 3)``: file offset, stored size and filter mask of every chunk of a dataset
+    chunked along axis 0 only, by chunk number, from HDF5's own chunk index (offset -1: none).
+    """
+    c = int(ds.chunks[0])
+    table = np.full((-(-int(ds.shape[0]) // c), 3), -1, np.int64)
+
+    def visit(info: Any) -> None:
+        j = info.chunk_offset[0] // c
+        if j < len(table):
+            table[j] = (info.byte_offset, info.size, info.filter_mask)
+
+    ds.id.chunk_iter(visit)
+    return table
 
 
 def flatten_args(function: int, args: Sequence[Sequence[int]]) -> np.ndarray:
@@ -233,6 +253,9 @@ class ShardWriter:
                                       chunks=(max(1, len(table)),), **kw)
         self._file.attrs["n_frames"] = self._n_frames
         self._file.attrs["n_steps"] = n
+        index = np.stack([chunk_table(self._frames[k]) for k in self.schema.keys()])
+        if index.size:
+            self._file.create_dataset(CHUNK_INDEX, data=index, chunks=index.shape, **kw)
         self._file.close()
         fsync_path(self.path)
 
@@ -257,7 +280,8 @@ class FrameSource:
     vectorised pass, then decompressed. Any other pipeline is read through h5py, chunk by chunk.
     """
 
-    def __init__(self, ds: h5py.Dataset, mm: mmap.mmap | None, where: str) -> None:
+    def __init__(self, ds: h5py.Dataset, mm: mmap.mmap | None, where: str,
+                 table: np.ndarray | None = None) -> None:
         self.ds = ds
         self.where = where
         self.chunk_frames = int(ds.chunks[0])
@@ -267,25 +291,20 @@ class FrameSource:
         self.chunk_bytes = self.chunk_frames * int(np.prod(self.frame_shape)) * ds.dtype.itemsize
         self._mm = mm if mm is not None and fast_path_ok(ds) else None
         self._decoder = ChunkDecoder()
+        self._stored = table
         self._table: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def _chunk_table(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """File offset, stored size and filter mask of every chunk, by chunk number."""
+        """File offset, stored size and filter mask of every chunk, by chunk number: the
+        shard's stored chunk index, else (older shards) HDF5's, walked once."""
         if self._table is None:
             n = -(-self.n_frames // self.chunk_frames)
-            offset = np.full(n, -1, np.int64)
-            size = np.zeros(n, np.int64)
-            mask = np.zeros(n, np.int64)
-
-            def visit(info: Any) -> None:
-                j = info.chunk_offset[0] // self.chunk_frames
-                if j < n:
-                    offset[j], size[j], mask[j] = info.byte_offset, info.size, info.filter_mask
-
-            self.ds.id.chunk_iter(visit)
-            if (offset < 0).any() or (size < 5).any():
-                raise ChecksumError(f"{self.where}: {int((offset < 0).sum())} chunk(s) missing")
-            self._table = (offset, size, mask)
+            t = self._stored if self._stored is not None else chunk_table(self.ds)
+            if t.shape != (n, 3):
+                raise ChecksumError(f"{self.where}: the chunk index does not fit the dataset")
+            if (t[:, 0] < 0).any() or (t[:, 1] < 5).any():
+                raise ChecksumError(f"{self.where}: {int((t[:, 0] < 0).sum())} chunk(s) missing")
+            self._table = (t[:, 0], t[:, 1], t[:, 2])
         return self._table
 
     @property
@@ -348,6 +367,22 @@ class Shard:
             raise
         self._sources: dict[str, FrameSource] = {}
         self._mm: mmap.mmap | None = None
+        self._index: dict[str, np.ndarray] | None = None
+
+    def chunk_index(self) -> dict[str, np.ndarray]:
+        """The stored chunk index by frame key (empty for shards written before it existed)."""
+        if self._index is None:
+            self._index = {}
+            if CHUNK_INDEX in self.file:
+                try:
+                    stored = self.file[CHUNK_INDEX][()]
+                except OSError as e:
+                    raise _damaged(self.path, _first_line(e)) from None
+                keys = self.schema.keys()
+                if stored.ndim != 3 or len(stored) != len(keys):
+                    raise _damaged(self.path, "its chunk index does not fit its schema")
+                self._index = dict(zip(keys, stored))
+        return self._index
 
     def frames(self, key: str) -> FrameSource:
         """The chunk reader of frame dataset ``key``."""
@@ -356,7 +391,8 @@ class Shard:
                 with open(self.path, "rb") as f:
                     self._mm = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
             self._sources[key] = FrameSource(self.file[f"frames/{key}"], self._mm,
-                                             f"{self.path.name}:{key}")
+                                             f"{self.path.name}:{key}",
+                                             self.chunk_index().get(key))
         return self._sources[key]
 
     def steps(self) -> dict[str, np.ndarray]:
@@ -387,5 +423,6 @@ def _first_line(e: BaseException) -> str:
     return str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
 
 
-__all__ = ["ARG_WIDTH", "ChecksumError", "FrameSource", "ObservationError", "Shard",
-           "ShardWriter", "flatten_args", "function_call", "fsync_path", "sha256_file"]
+__all__ = ["ARG_WIDTH", "CHUNK_INDEX", "ChecksumError", "FrameSource", "ObservationError",
+           "Shard", "ShardWriter", "chunk_table", "flatten_args", "function_call", "fsync_path",
+           "sha256_file"]

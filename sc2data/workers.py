@@ -102,9 +102,9 @@ def _worker(tasks: Any, results: Any, job: Job, out: Path, parent: int) -> None:
 
 
 def run_parallel(job: Job, todo: list[int], workers: int, out: Path, on_steps: Report,
-                 describe: Callable[[int], str]) -> dict[int, Any]:
+                 describe: Callable[[int], str], what: str = "rollout") -> dict[int, Any]:
     """Run ``job`` for every shard in ``todo`` on ``workers`` processes writing into ``out``;
-    returns each shard's result."""
+    returns each shard's result. ``what`` names the work in error messages."""
     # spawn, not forkserver: a forkserver's children are not ours, so they would outlive a
     # ``kill -9`` of this process; spawned ones are, and die with it (_die_with_parent).
     ctx = mp.get_context("spawn")
@@ -135,7 +135,7 @@ def run_parallel(job: Job, todo: list[int], workers: int, out: Path, on_steps: R
             except queue.Empty:
                 dead = [p for p in procs if p.exitcode not in (None, 0)]
                 if dead:
-                    raise Sc2DataError(f"a rollout worker died (exit code {dead[0].exitcode}); "
+                    raise Sc2DataError(f"a {what} worker died (exit code {dead[0].exitcode}); "
                                        f"rerun the same command to resume") from None
                 continue
             if msg[0] == "steps":
@@ -144,7 +144,7 @@ def run_parallel(job: Job, todo: list[int], workers: int, out: Path, on_steps: R
                 pending.discard(msg[1])
                 done[msg[1]] = msg[2]
             else:
-                raise Sc2DataError(f"rollout of {describe(msg[1])} failed: {msg[2]}")
+                raise Sc2DataError(f"{what} of {describe(msg[1])} failed: {msg[2]}")
     finally:
         for p in procs:
             if p.is_alive() and pending:

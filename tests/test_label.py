@@ -358,3 +358,28 @@ def test_cli_label_resumes_after_interruption(data: Path, tmp_path: Path,
     for name in (LABELS_FILE, STACKS_FILE):
         assert pq.read_table(data / name).equals(pq.read_table(clean / name))
     assert not (data / PARTS_DIR).exists()
+
+
+def test_cli_label_in_worker_processes_equals_one_process(
+        data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    one, fresh = (Path(shutil.copytree(data, tmp_path / n)) for n in ("one", "fresh"))
+    assert exit_code("label", str(one), "--no-progress") == 0
+    assert exit_code("label", str(data), "--no-progress", "--workers", "2") == 0
+    for name in (LABELS_FILE, STACKS_FILE):
+        a, b = (pq.read_table(d / name) for d in (data, one))
+        assert a.replace_schema_metadata(None).equals(b.replace_schema_metadata(None)), name
+    assert read_meta(data)["fingerprint"] == read_meta(one)["fingerprint"]
+    folder = tmp_path / "my_rules"
+    folder.mkdir()
+    (folder / "bad.py").write_text(BAD_RULE.format(
+        id="late_raiser", requires='["player"]',
+        body="if len(batch) > 5:\n        raise RuntimeError('oops')\n"
+             "    return np.zeros(len(batch), bool)"))
+    capsys.readouterr()
+    assert exit_code("label", str(fresh), "--rules-dir", str(folder), "--no-progress",
+                     "--workers", "2") == 2
+    assert re.search(r"^sc2data: error: label of shard-0000[01]\.h5 failed: rule 'late_raiser' "
+                     r"from file .*bad\.py raised RuntimeError: oops", one_line_error(capsys))
+    assert nothing_written(fresh)
+    assert exit_code("label", str(data), "--no-progress", "--workers", "0") == 2
+    assert "workers must be at least 1, not 0" in one_line_error(capsys)

@@ -17,7 +17,8 @@ from sc2data.dataset import Dataset
 from sc2data.errors import Sc2DataError
 from sc2data.rollout import episode_seeds
 from sc2data.schema import Schema, StackBatch
-from sc2data.storage import ARG_WIDTH, FrameSource, Shard, ShardWriter, flatten_args, function_call
+from sc2data.storage import (ARG_WIDTH, CHUNK_INDEX, FrameSource, Shard, ShardWriter, chunk_table,
+                             flatten_args, function_call)
 from sc2data.synthetic import synthetic_episode
 from tests.synthetic_data import STEPS, make_dataset
 
@@ -164,6 +165,49 @@ def test_reading_a_damaged_chunk_raises(dataset: Path, tmp_path: Path) -> None:
         ds.read([0], [c + 1], keys=["screen/unit_hit_points"])
     ds.read([0], [c], keys=["screen/unit_type", "player"])
     ds.read([0, 1], [0, 5])
+
+
+def test_the_stored_chunk_index_is_hdf5s(tmp_path: Path) -> None:
+    """Each shard stores its frame datasets' chunk index (what HDF5's says); readers use it,
+    and shards without one (written before it existed) read the same through HDF5's."""
+    path = tmp_path / "s.h5"
+    write_shard(path, lengths=(6, 9))
+    shard = Shard(path)
+    try:
+        index = shard.chunk_index()
+        assert list(index) == list(SCHEMA.keys())
+        for key in SCHEMA.keys():
+            np.testing.assert_array_equal(index[key], chunk_table(shard.file[f"frames/{key}"]))
+        ids = np.arange(-(-17 // 4))
+        stored = {k: shard.frames(k).read_chunks(ids) for k in SCHEMA.keys()}
+    finally:
+        shard.close()
+    with h5py.File(path, "r+") as f:
+        del f[CHUNK_INDEX]
+    shard = Shard(path)
+    try:
+        assert shard.chunk_index() == {}
+        assert {k: shard.frames(k).read_chunks(ids) for k in SCHEMA.keys()} == stored
+    finally:
+        shard.close()
+
+
+def test_a_wrong_chunk_index_is_caught(dataset: Path, tmp_path: Path) -> None:
+    import shutil
+
+    from sc2data.audit import verify
+
+    copy = Path(shutil.copytree(dataset, tmp_path / "d"))
+    with h5py.File(copy / "shard-00001.h5", "r+") as f:
+        index = f[CHUNK_INDEX][()]
+        index[2, 1, 0] += 8  # chunk 1 of screen/creep: 8 bytes off
+        f[CHUNK_INDEX][...] = index
+    faults = verify(copy)
+    assert "shard-00001.h5:chunk_index: disagrees with HDF5's chunk index of frames/screen/creep" \
+        in faults
+    ds = sc2data.open_dataset(copy, cache_bytes=0)
+    with pytest.raises(ChecksumError, match="shard-00001.h5:screen/creep"):
+        ds.read([2], [Codec().chunk_frames])
 
 
 def test_shard_of_another_schema_version_is_refused(tmp_path: Path) -> None:

@@ -36,6 +36,7 @@ def bar(total: int, *, desc: str, unit: str, show: bool | None) -> Any:
 
     if show is None and not sys.stderr.isatty():
         return tqdm(total=total, desc=desc, unit=unit, unit_scale=True, ascii=True, ncols=100,
-                    file=_Lines(sys.stderr), mininterval=LOG_EVERY_S, delay=LOG_EVERY_S)
+                    file=_Lines(sys.stderr), mininterval=LOG_EVERY_S, maxinterval=LOG_EVERY_S,
+                    delay=LOG_EVERY_S)
     return tqdm(total=total, desc=desc, unit=unit, unit_scale=True, dynamic_ncols=True,
                 smoothing=0.1, disable=show is False)

@@ -439,8 +439,14 @@ class LocalUnits:
         units = [(unit.key, str(path)) for unit, path in todo]
         job = functools.partial(_unit_job, str(Path(self.data).resolve()), self.selection, units,
                                 tuple(keys), batch_size)
-        run_parallel(job, list(range(len(units))), self.workers, todo[0][1].parent, bar.update,
-                     lambda i: units[i][0].split(":")[0], what="label")
+        parts = todo[0][1].parent
+        try:
+            run_parallel(job, list(range(len(units))), self.workers, parts, bar.update,
+                         lambda i: units[i][0].split(":")[0], what="label")
+        except BaseException:  # a worker stopped mid-write leaves its temporary part behind
+            for stale in parts.glob(".*.tmp-*"):
+                stale.unlink(missing_ok=True)
+            raise
 
 
 # -- the dataset door ------------------------------------------------------------------------------

@@ -390,8 +390,10 @@ def read_labels(folder: Path | str) -> Labels:
 
 # -- labelling units in other processes ----------------------------------------------------------
 @functools.lru_cache(maxsize=4)
-def _rules_and_source(data: str, selection: tuple[Any, Any, Any]
+def _rules_and_source(data: str, selection: tuple[Any, Any, Any], run: str
                       ) -> tuple[Sequence[Registered], Source]:
+    """Loaded once per worker process and run (``run``: the run's fingerprint, so a process
+    that outlives a run, as Ray's do, reloads for the next)."""
     from sc2data.registry import load_registry
 
     include, exclude, rules_dir = selection
@@ -405,10 +407,10 @@ def label_unit(data: str, selection: tuple[Any, Any, Any], unit_key: str, part: 
     ``selection`` = (include, exclude, rules_dir) and checked to be the run's (its parts
     folder's ``state.json``), then the unit is written with :func:`write_part`."""
     include, exclude, rules_dir = selection
+    run = str(json.loads((Path(part).parent / "state.json").read_text()).get("fingerprint"))
     rules, source = _rules_and_source(data, (None if include is None else tuple(include),
-                                             tuple(exclude), rules_dir))
-    state = json.loads((Path(part).parent / "state.json").read_text())
-    if fingerprint(rules, source.info) != state.get("fingerprint"):
+                                             tuple(exclude), rules_dir), run)
+    if fingerprint(rules, source.info) != run:
         raise Sc2DataError(f"{socket.gethostname()} sees other rules or other data than the run "
                            f"that started this label; install the same sc2data and rule "
                            f"plugins on every node and share the dataset folder")

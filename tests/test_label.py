@@ -383,3 +383,25 @@ def test_cli_label_in_worker_processes_equals_one_process(
     assert nothing_written(fresh)
     assert exit_code("label", str(data), "--no-progress", "--workers", "0") == 2
     assert "workers must be at least 1, not 0" in one_line_error(capsys)
+
+
+def test_label_unit_reloads_for_a_new_run_in_a_long_lived_process(tmp_path: Path) -> None:
+    """A process that labels units of several runs (Ray's workers do) sees each run's data:
+    after the dataset at the same path is rolled out anew, a second label run works."""
+    from sc2data.label import label_dataset, label_unit
+
+    data = tmp_path / "data"
+
+    def in_this_process(todo, keys, batch_size, bar):  # type: ignore[no-untyped-def]
+        for unit, part in todo:
+            label_unit(str(data), (None, (), None), unit.key, str(part), keys, batch_size,
+                       bar.update)
+
+    fingerprints = []
+    for seed in ("3", "4"):
+        shutil.rmtree(data, ignore_errors=True)
+        assert exit_code("rollout", "--out", str(data), "--episodes", "2", "--max-steps", "60",
+                         "--seed", seed, "--no-progress") == 0
+        assert label_dataset(data, progress=False, run_units=in_this_process).stacks == 120
+        fingerprints.append(read_meta(data)["dataset"]["fingerprint"])
+    assert fingerprints[0] != fingerprints[1]

@@ -326,3 +326,19 @@ def test_build_on_ray_equals_a_local_build(ray_instance: Any, tmp_path: Path,
         a, b = (pq.read_table(o / "rollout" / name).replace_schema_metadata(None)
                 for o in outs.values())
         assert a.equals(b), name
+
+
+@pytest.mark.parametrize("args, match", [
+    (["--ray=somewhere"], "--ray takes local, auto, HOST:PORT or ray://HOST:PORT, not 'some"),
+    (["--ray", "--ray-memory", "0"], "ray-memory must be at least 1 MB, not 0"),
+    (["--ray", "--workers", "0"], "workers must be at least 1"),
+    (["--workers", "0"], "workers must be at least 1"),
+])
+def test_bad_build_options_fail_in_one_line(args: list[str], match: str, tmp_path: Path,
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("ray")
+    recipe = tmp_path / "tiny.toml"
+    recipe.write_text(TINY_RECIPE)
+    code, _, err = run_cli(["build", recipe, "--out", tmp_path / "out", *args], capsys)
+    assert_one_line_error(code, err, f"sc2data: error: {match}")
+    assert not (tmp_path / "out").exists()

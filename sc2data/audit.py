@@ -7,6 +7,7 @@ index, and cross-checks the manifest, the shards' attributes and tables, and the
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -16,8 +17,9 @@ import h5py
 import numpy as np
 
 from sc2data._pysc2 import actions
-from sc2data.dataset import (INDEX, MANIFEST, PARTIAL, manifest_schema, read_index, read_manifest)
+from sc2data.dataset import INDEX, MANIFEST, PARTIAL, manifest_schema, read_index, read_manifest
 from sc2data.errors import Sc2DataError
+from sc2data.schema import Block
 from sc2data.storage import CHUNK_INDEX, EPISODE_COLUMNS, Shard, chunk_table, sha256_file
 
 _BLOCK = 1024
@@ -33,18 +35,22 @@ class ShardStats:
     steps: int
     frames: int
     bytes: int
-    key_bytes: dict[str, int]
-    """Stored (compressed) bytes of each frame dataset."""
+    block_bytes: dict[str, int]
+    """Stored (compressed) bytes of each frame dataset (storage block)."""
 
 
 def shard_stats(path: Path) -> ShardStats:
     shard = Shard(path)
     try:
-        keys = shard.schema.keys()
-        key_bytes = {k: int(shard.file[f"frames/{k}"].id.get_storage_size()) for k in keys}
+        names = [b.name for b in shard.schema.blocks()]
+        try:
+            block_bytes = {n: int(shard.file[f"frames/{n}"].id.get_storage_size()) for n in names}
+        except KeyError as e:
+            raise Sc2DataError(f"{path} is damaged (a frame dataset is missing: {e}); run "
+                               f"`sc2data verify` on its folder") from None
         return ShardStats(path.name, len(shard.episodes["episode"]),
                           int(shard.episodes["n_steps"].sum()), int(shard.attrs["n_frames"]),
-                          path.stat().st_size, key_bytes)
+                          path.stat().st_size, block_bytes)
     finally:
         shard.close()
 
@@ -71,16 +77,22 @@ def info(folder: Path) -> list[str]:
              f"codec     {manifest['settings'].get('codec')}",
              f"versions  {'  '.join(f'{k} {v}' for k, v in manifest.get('versions', {}).items())}",
              "", f"{'key':28s} {'dtype':7s} {'shape':10s} {'scale':>6s} {'kind':12s} "
-                 f"{'B/frame':>8s}"]
+                 "stored in"]
+    block_of = {k: b.name for b in schema.blocks() for k in b.keys}
     for l in schema.layers:
-        stored = sum(s.key_bytes[l.key] for s in stats) / max(frames, 1)
         side = schema.size(l.group)
         lines.append(f"{l.key:28s} {l.dtype.name:7s} {f'{side}x{side}':10s} {l.scale:6d} "
-                     f"{'categorical' if l.categorical else 'scalar':12s} {stored:8.1f}")
+                     f"{'categorical' if l.categorical else 'scalar':12s} {block_of[l.key]}")
     for v in schema.vectors:
-        stored = sum(s.key_bytes[v.name] for s in stats) / max(frames, 1)
         lines.append(f"{v.name:28s} {v.dtype.name:7s} {str(v.size):10s} {'':>6s} "
-                     f"{'vector':12s} {stored:8.1f}")
+                     f"{'vector':12s} {block_of[v.name]}")
+    lines += ["", f"{'block':16s} {'frame shape':14s} {'keys':>4s} {'raw B/frame':>11s} "
+                  f"{'B/frame':>8s}"]
+    for b in schema.blocks():
+        stored = sum(s.block_bytes[b.name] for s in stats) / max(frames, 1)
+        raw = int(np.prod(b.frame_shape)) * b.dtype.itemsize
+        shape = "x".join(map(str, b.frame_shape))
+        lines.append(f"{b.name:16s} {shape:14s} {len(b.keys):4d} {raw:11,d} {stored:8.1f}")
     lines += ["", f"{'shard':18s} {'episodes':>8s} {'steps':>9s} {'frames':>9s} {'bytes':>13s} "
                   f"{'B/frame':>8s}"]
     for s in stats:
@@ -121,8 +133,8 @@ def _check_shard(path: Path, rows: dict[str, Any], manifest: dict[str, Any],
         expected_starts = np.concatenate([[0], np.cumsum(eps["n_steps"] + 1)[:-1]])
         if len(eps["episode"]) and not np.array_equal(eps["frame_start"], expected_starts):
             faults.append(f"{path.name}: episode frame offsets are not contiguous")
-        for key in shard.schema.keys():
-            faults += _check_dataset(shard, f"frames/{key}", n_frames)
+        for block in shard.schema.blocks():
+            faults += _check_block(shard, block, n_frames)
         faults += _check_chunk_index(shard)
         for key in ("function", "args", "reward"):
             faults += _check_dataset(shard, f"steps/{key}", n_steps)
@@ -144,11 +156,26 @@ def _check_chunk_index(shard: Shard) -> list[str]:
         stored = shard.chunk_index()
     except Sc2DataError as e:
         return [str(e)]
-    for key, table in stored.items():
-        if not np.array_equal(table, chunk_table(shard.file[f"frames/{key}"])):
+    for name, table in stored.items():
+        if f"frames/{name}" not in shard.file:
+            continue  # reported by _check_block
+        if not np.array_equal(table, chunk_table(shard.file[f"frames/{name}"])):
             return [f"{shard.path.name}:{CHUNK_INDEX}: disagrees with HDF5's chunk index of "
-                    f"frames/{key}"]
+                    f"frames/{name}"]
     return []
+
+
+def _check_block(shard: Shard, block: Block, n_frames: int) -> list[str]:
+    """A frame dataset holds what the schema's block says (keys, shape, dtype), all readable."""
+    name = f"frames/{block.name}"
+    if name in shard.file:
+        ds = shard.file[name]
+        what = (ds.shape[1:], ds.dtype, ds.attrs.get("keys"))
+        want = (block.frame_shape, block.dtype, json.dumps(list(block.keys)))
+        if what != want:
+            return [f"{shard.path.name}:{name}: holds {what[0]} {what[1]} frames of "
+                    f"{what[2]}, the schema says {want[0]} {want[1]} of {want[2]}"]
+    return _check_dataset(shard, name, n_frames)
 
 
 def _check_dataset(shard: Shard, name: str, length: int) -> list[str]:

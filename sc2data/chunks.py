@@ -37,14 +37,15 @@ class ChecksumError(Sc2DataError, OSError):
 class Codec:
     """How frame datasets are chunked and compressed (chosen by measurement, BENCHMARKS.md)."""
 
-    level: int = 1
-    """Zstandard level. On reduced-random sim frames level 3 saves ~10 % more bytes than level 1
-    but writes slower; level 1 already meets the 2 KB/frame budget at 8-frame chunks."""
-    chunk_frames: int = 8
+    level: int = 3
+    """Zstandard level. On reduced-random sim frames stored in blocks, level 3 compresses as fast
+    as level 1 and 12 % smaller (1,463 against 1,666 B/frame at 4-frame chunks); level 4 and up
+    write markedly slower (BENCHMARKS.md)."""
+    chunk_frames: int = 4
     """Frames per chunk. Consecutive frames are near identical, so longer chunks compress far
-    better (paper layers: 4.8 KB/frame at 1, 2.1 KB at 4, 1.4 KB at 8, 1.1 KB at 16). A random
-    read decodes a whole chunk per key, but its cost is dominated by the per-chunk overhead up to
-    8 frames, so 8 is where size stops buying speed (BENCHMARKS.md)."""
+    better (paper layers in blocks, level 3: 2.1 KB/frame at 2, 1.5 KB at 4, 1.1 KB at 8), but a
+    random stack decodes whole chunks of every block it reads: 4 is the shortest chunk that
+    keeps well under the 2 KB/frame budget, and reads random stacks ≈ 1.2–1.4× faster than 8."""
 
     def dataset_kwargs(self) -> dict[str, Any]:
         """h5py ``create_dataset`` filter arguments: Zstd then fletcher32, as HDF5 applies them."""
@@ -103,19 +104,24 @@ class ChunkDecoder:
     def __init__(self) -> None:
         self._zstd = zstandard.ZstdDecompressor()
 
-    def decode(self, raws: Sequence[bytes], masks: Sequence[int], sizes: Sequence[int],
-               wheres: Sequence[str]) -> list[bytes]:
-        """Each chunk's decoded bytes (``sizes[i]`` of them). All checksums are verified first,
-        in one vectorised pass, so chunks of many datasets are best decoded in one call; a
-        mismatch raises :class:`ChecksumError` naming the first damaged chunk's dataset."""
+    def _verified(self, raws: Sequence[bytes], wheres: Sequence[str]) -> list[memoryview]:
+        """The payloads of ``raws`` once every checksum matched (one vectorised pass)."""
         payloads = [memoryview(r)[:-4] for r in raws]
         stored = np.frombuffer(b"".join(r[-4:] for r in raws), "<u4")
         bad = np.flatnonzero(fletcher32(payloads) != stored)
         if bad.size:
             raise ChecksumError(f"{wheres[bad[0]]}: fletcher32 checksum mismatch in {bad.size} "
                                 f"chunk(s); the file is damaged")
+        return payloads
+
+    def decode(self, raws: Sequence[bytes], masks: Sequence[int], sizes: Sequence[int],
+               wheres: Sequence[str]) -> list[bytes]:
+        """Each chunk's decoded bytes (``sizes[i]`` of them). All checksums are verified first,
+        in one vectorised pass, so chunks of many datasets are best decoded in one call; a
+        mismatch raises :class:`ChecksumError` naming the first damaged chunk's dataset."""
         out = []
-        for p, m, size, where in zip(payloads, masks, sizes, wheres, strict=True):
+        for p, m, size, where in zip(self._verified(raws, wheres), masks, sizes, wheres,
+                                     strict=True):
             try:
                 data = bytes(p) if m & 1 else self._zstd.decompress(p, max_output_size=size)
             except zstandard.ZstdError as e:
@@ -125,6 +131,31 @@ class ChunkDecoder:
                                     f"damaged")
             out.append(data)
         return out
+
+    def decode_into(self, raws: Sequence[bytes], masks: Sequence[int], outs: Sequence[np.ndarray],
+                    wheres: Sequence[str]) -> None:
+        """:meth:`decode`, each chunk straight into its own contiguous array ``outs[i]``, which it
+        must fill exactly: readers decode a batch's chunks into one array, with no joining copy."""
+        for p, m, out, where in zip(self._verified(raws, wheres), masks, outs, wheres,
+                                    strict=True):
+            view = memoryview(out).cast("B")
+            if m & 1:
+                if len(p) != len(view):
+                    raise ChecksumError(f"{where}: a chunk holds the wrong size; the file is "
+                                        f"damaged")
+                view[:] = p
+                continue
+            try:
+                with self._zstd.stream_reader(p) as reader:
+                    got = 0
+                    while got < len(view) and (n := reader.readinto(view[got:])):
+                        got += n
+                    over = reader.read(1)
+            except zstandard.ZstdError as e:
+                raise ChecksumError(f"{where}: a chunk does not decompress ({e})") from None
+            if got != len(view) or over:
+                raise ChecksumError(f"{where}: a chunk decodes to the wrong size; the file is "
+                                    f"damaged")
 
 
 def fast_path_ok(ds: h5py.Dataset) -> bool:

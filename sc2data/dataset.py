@@ -6,8 +6,8 @@ shard, frame and step offsets, and the shard's sha256 and size. The index is wri
 atomically, so its presence means the rollout finished.
 
 Reads go chunk by chunk: a batch of (episode, step) requests is sorted into the chunks it
-touches, each chunk of each key is fetched and decoded once (or taken from an LRU cache of
-decoded chunks), and the stacks are gathered in numpy.
+touches, each chunk of each storage block holding a wanted key is fetched and decoded once (or
+taken from an LRU cache of decoded chunks), and the stacks are gathered in numpy.
 """
 
 from __future__ import annotations
@@ -26,11 +26,12 @@ import pyarrow.parquet as pq
 
 from sc2data.chunks import ChunkDecoder
 from sc2data.errors import Sc2DataError
-from sc2data.schema import Schema, SchemaError, StackBatch
+from sc2data.schema import Block, Schema, SchemaError, StackBatch
 from sc2data.storage import FrameSource, Shard, fsync_path
 
 DATASET_FORMAT = "sc2data-dataset"
-DATASET_FORMAT_VERSION = 1
+DATASET_FORMAT_VERSION = 2
+"""2: shards of format 2 (frames in blocks of keys)."""
 MANIFEST = "dataset.json"
 INDEX = "index.parquet"
 PARTIAL = ".partial"
@@ -141,27 +142,32 @@ def keep_freed_memory() -> None:
 
 
 class _ChunkCache:
-    """Decoded chunks (immutable bytes), least recently used out first, bounded in bytes."""
+    """Decoded chunks (read-only arrays), least recently used out first, bounded in bytes.
+
+    An entry is a view into the array its read decoded a whole batch of chunks into, so caching
+    copies nothing; that array lives while any of its chunks is cached, which can hold at most
+    one batch's worth of decoded chunks beyond ``max_bytes``.
+    """
 
     def __init__(self, max_bytes: int) -> None:
         self.max_bytes = max_bytes
         self.bytes = 0
-        self._items: OrderedDict[tuple[int, str, int], bytes] = OrderedDict()
+        self._items: OrderedDict[tuple[int, str, int], np.ndarray] = OrderedDict()
 
-    def get(self, key: tuple[int, str, int]) -> bytes | None:
+    def get(self, key: tuple[int, str, int]) -> np.ndarray | None:
         item = self._items.get(key)
         if item is not None:
             self._items.move_to_end(key)
         return item
 
-    def put(self, key: tuple[int, str, int], value: bytes) -> None:
-        if len(value) > self.max_bytes or key in self._items:
+    def put(self, key: tuple[int, str, int], value: np.ndarray) -> None:
+        if value.nbytes > self.max_bytes or key in self._items:
             return
         self._items[key] = value
-        self.bytes += len(value)
+        self.bytes += value.nbytes
         while self.bytes > self.max_bytes:
             _, old = self._items.popitem(last=False)
-            self.bytes -= len(old)
+            self.bytes -= old.nbytes
 
 
 class Dataset:
@@ -188,6 +194,8 @@ class Dataset:
         self._stack_offsets = np.concatenate([[0], np.cumsum(self.n_steps)])
         self._cache = _ChunkCache(cache_bytes)
         self._decoder = ChunkDecoder()
+        self._blocks = self.schema.blocks()
+        self._chunk_frames = int(self.manifest["settings"]["codec"]["chunk_frames"])
         self._frame_layout: dict[str, tuple[tuple[int, ...], np.dtype]] = {
             l.key: ((self.schema.size(l.group),) * 2, l.dtype) for l in self.schema.layers}
         self._frame_layout.update({v.name: ((v.size,), v.dtype) for v in self.schema.vectors})
@@ -254,50 +262,63 @@ class Dataset:
         return keys
 
     # -- reading ------------------------------------------------------------------------------
-    def _chunks(self, si: int, keys: Sequence[str], frames: np.ndarray
-                ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-        """Per key, (buffer, rows): ``buffer[rows]`` are frames ``frames`` of shard ``si``.
+    def _decode(self, blocks: Sequence[Block], shard_of: np.ndarray, frames: np.ndarray
+                ) -> tuple[list[np.ndarray], np.ndarray]:
+        """Decode what ``blocks`` hold of frames ``frames[i]`` of shards ``shard_of[i]``.
 
-        Each chunk is taken from the cache or decoded once; the checksums of every chunk this
-        call decodes, of all keys, are verified together in one vectorised pass.
+        Returns one array per block holding every chunk needed, chunk after chunk (from the
+        cache or decoded straight into place), and the row of that array where each requested
+        frame lies. The checksums of every chunk decoded, of all shards and blocks, are verified
+        together in one vectorised pass.
         """
-        shard, cache = self._shard(si), self._cache
-        plans: list[tuple[str, FrameSource, np.ndarray, np.ndarray, list[bytes | None]]] = []
+        c = self._chunk_frames
+        chunk = shard_of.astype(np.int64) << 40 | frames // c  # (shard, chunk) as one sortable key
+        uniq, inverse = np.unique(chunk, return_inverse=True)
+        rows = inverse.reshape(-1) * c + frames % c
+        u_shard, u_chunk = uniq >> 40, uniq & ((1 << 40) - 1)
+        starts = np.flatnonzero(np.diff(u_shard, prepend=-1))
+        spans = list(zip(starts.tolist(), [*starts[1:].tolist(), len(uniq)]))
+        cache = self._cache
+        bufs: list[np.ndarray] = []
         raws: list[bytes] = []
         masks: list[int] = []
-        sizes: list[int] = []
+        dests: list[np.ndarray] = []
         wheres: list[str] = []
-        owners: list[tuple[int, int]] = []  # (plan, position in that plan's chunk list)
-        for key in keys:
-            src = shard.frames(key)
-            ids, inverse = np.unique(frames // src.chunk_frames, return_inverse=True)
-            datas: list[bytes | None] = [cache.get((si, key, i)) for i in ids.tolist()]
-            missing = [j for j, d in enumerate(datas) if d is None]
-            if missing and src.fast:
-                r, m = src.raw_chunks(ids[missing])
-                raws += r
-                masks += m
-                sizes += [src.chunk_bytes] * len(r)
-                wheres += [src.where] * len(r)
-                owners += [(len(plans), j) for j in missing]
-            elif missing:
-                for j, data in zip(missing, src.read_chunks(ids[missing]), strict=True):
-                    datas[j] = data
-            plans.append((key, src, ids, inverse, datas))
+        fresh: list[tuple[str, int, np.ndarray, np.ndarray]] = []
+        for block in blocks:
+            buf = np.empty((len(uniq), c, *block.frame_shape), block.dtype)
+            for lo, hi in spans:
+                si = int(u_shard[lo])
+                src = self._shard(si).frames(block.name)
+                if src.chunk_frames != c or src.frame_shape != block.frame_shape:
+                    raise Sc2DataError(f"{src.where} is chunked or shaped unlike {MANIFEST} "
+                                       f"says; run `sc2data verify` on {self.folder}")
+                missing: list[int] = []
+                for j, i in enumerate(u_chunk[lo:hi].tolist(), lo):
+                    hit = cache.get((si, block.name, i))
+                    if hit is None:
+                        missing.append(j)
+                    else:
+                        buf[j] = hit
+                ids = u_chunk[missing]
+                if missing and src.fast:
+                    r, m = src.raw_chunks(ids)
+                    raws += r
+                    masks += m
+                    dests += [buf[j] for j in missing]
+                    wheres += [src.where] * len(r)
+                elif missing:
+                    for j, data in zip(missing, src.read_chunks(ids), strict=True):
+                        buf[j] = np.frombuffer(data, block.dtype).reshape(buf.shape[1:])
+                fresh += [(block.name, si, buf[j], i) for j, i in zip(missing, ids.tolist())]
+            bufs.append(buf)
         if raws:
-            for (p, j), data in zip(owners, self._decoder.decode(raws, masks, sizes, wheres),
-                                    strict=True):
-                plans[p][4][j] = data
-        out = {}
-        for key, src, ids, inverse, datas in plans:
-            chunks = [d for d in datas if d is not None]
-            assert len(chunks) == len(datas)
-            for i, chunk in zip(ids.tolist(), chunks):
-                cache.put((si, key, i), chunk)
-            buf = np.frombuffer(chunks[0] if len(chunks) == 1 else b"".join(chunks),
-                                src.dtype).reshape(-1, *src.frame_shape)
-            out[key] = (buf, inverse.reshape(-1) * src.chunk_frames + frames % src.chunk_frames)
-        return out
+            self._decoder.decode_into(raws, masks, dests, wheres)
+        for buf in bufs:
+            buf.flags.writeable = False
+        for name, si, view, i in fresh:
+            cache.put((si, name, i), view)
+        return [b.reshape(-1, *b.shape[2:]) for b in bufs], rows
 
     def read(self, episodes: Sequence[int] | np.ndarray, steps: Sequence[int] | np.ndarray,
              keys: Iterable[str] | None = None) -> StackBatch:
@@ -309,23 +330,16 @@ class Dataset:
         keys = self._keys(keys)
         rows = self._rows(episodes, steps)
         first = self._frame_start[rows] + steps
-        shard_of = self._shard_of[rows]
-        shards = np.unique(shard_of)
+        frames = np.stack([first, first + 1], axis=1).reshape(-1)  # (previous, current) pairs
+        wanted = set(keys)
+        blocks = [b for b in self._blocks if wanted.intersection(b.keys)]
+        bufs, at = self._decode(blocks, np.repeat(self._shard_of[rows], 2), frames)
         out: dict[str, np.ndarray] = {}
-        for k in keys:
-            shape, dtype = self._frame_layout[k]
-            out[k] = np.empty((len(rows), 2, *shape), dtype)
-        for si in shards.tolist():
-            sel = None if len(shards) == 1 else np.flatnonzero(shard_of == si)
-            f = first if sel is None else first[sel]
-            need = np.stack([f, f + 1], axis=1).reshape(-1)  # (previous, current) interleaved
-            for k, (buf, at) in self._chunks(si, keys, need).items():
-                flat = out[k].reshape(-1, *buf.shape[1:])
-                if sel is None:
-                    np.take(buf, at, axis=0, out=flat, mode="clip")
-                else:
-                    flat[np.stack([2 * sel, 2 * sel + 1], axis=1).reshape(-1)] = buf[at]
-        return StackBatch(out, self.schema)
+        for block, buf in zip(blocks, bufs, strict=True):
+            for k, part in zip(block.keys, block.parts, strict=True):
+                if k in wanted:  # numpy's gather copies whole frames at a time
+                    out[k] = buf[at, part].reshape(len(rows), 2, *self._frame_layout[k][0])
+        return StackBatch({k: out[k] for k in keys}, self.schema)
 
     def stack(self, episode: int, step: int, keys: Iterable[str] | None = None) -> StackBatch:
         """One stack (a batch of size 1): frames ``step`` and ``step + 1`` of ``episode``."""

@@ -111,6 +111,27 @@ our reading of the paper's "13 non-spatial features" gap: we keep both, whole.""
 
 
 @dataclass(frozen=True)
+class Block:
+    """Frame keys stored together, one HDF5 dataset per block (``/frames/<name>``).
+
+    Layers of one group (one image size) and one dtype are stacked along a layer axis, frame
+    shape ``(layers, H, W)``; vectors of one dtype are laid end to end, frame shape ``(fields,)``.
+    A stack of all keys then touches four chunks instead of one per key (BENCHMARKS.md).
+    """
+
+    name: str
+    """Dataset name: ``screen_uint8``, ``screen_uint16``, ``minimap_uint8``, ``vectors_int32``."""
+    keys: tuple[str, ...]
+    frame_shape: tuple[int, ...]
+    dtype: np.dtype
+    parts: tuple[slice | int, ...]
+    """Where each key sits along the block's first frame axis: a layer index, a vector's slice."""
+
+    def part(self, key: str) -> slice | int:
+        return self.parts[self.keys.index(key)]
+
+
+@dataclass(frozen=True)
 class Schema:
     """Which layers and vectors a dataset keeps, in which order."""
 
@@ -158,6 +179,29 @@ class Schema:
     def keys(self) -> tuple[str, ...]:
         """Every array key a frame carries: ``screen/<layer>``, ``minimap/<layer>``, vectors."""
         return tuple(l.key for l in self.layers) + tuple(v.name for v in self.vectors)
+
+    def blocks(self) -> tuple[Block, ...]:
+        """How frames are stored: the keys grouped by (group, dtype), in key order."""
+        out: list[Block] = []
+        for group in ("screen", "minimap"):
+            side = self.size(group)
+            for dtype in sorted({l.dtype for l in self.group(group)}, key=lambda d: d.itemsize):
+                ls = [l for l in self.group(group) if l.dtype == dtype]
+                out.append(Block(f"{group}_{dtype.name}", tuple(l.key for l in ls),
+                                 (len(ls), side, side), dtype, tuple(range(len(ls)))))
+        for dtype in sorted({v.dtype for v in self.vectors}, key=lambda d: d.itemsize):
+            vs = [v for v in self.vectors if v.dtype == dtype]
+            ends = np.cumsum([v.size for v in vs]).tolist()
+            out.append(Block(f"vectors_{dtype.name}", tuple(v.name for v in vs), (ends[-1],),
+                             dtype, tuple(slice(e - v.size, e) for v, e in zip(vs, ends))))
+        return tuple(out)
+
+    def block_of(self, key: str) -> Block:
+        """The storage block holding ``key``."""
+        for b in self.blocks():
+            if key in b.keys:
+                return b
+        raise KeyError(f"{key!r} is not a key of this schema; keys: {', '.join(self.keys())}")
 
     def frame_bytes(self) -> int:
         """Uncompressed bytes of one frame."""

@@ -2,15 +2,18 @@
 
 Layout, all derived from a :class:`~sc2data.schema.Schema`::
 
-    /frames/<key>      (F, …)  one dataset per schema key (``screen/unit_type``, ``player``, …);
-                               episodes back to back, T+1 frames for T steps, each frame once
+    /frames/<block>    (F, …)  one dataset per storage block (``Schema.blocks()``): the layers of
+                               one group and dtype stacked, ``screen_uint8`` (F, L, 64, 64), …,
+                               and the vectors end to end, ``vectors_int32`` (F, 25); its ``keys``
+                               attribute names what it holds, in order. Episodes back to back,
+                               T+1 frames for T steps, each frame once
     /steps/function    (S,)    pysc2 function id of the action taken between frames t and t+1
     /steps/args        (S, 5)  its arguments, flattened in pysc2's order, -1 padded
     /steps/reward      (S,)    the reward the step returned
     /episodes/<column> (E,)    episode, env_seed, agent_seed, frame_start, step_start, n_steps,
                                reward
     /chunk_index       (K, C, 3) file offset, stored size and filter mask of chunk c of frame
-                               dataset k (keys in schema order): what HDF5's chunk index says,
+                               dataset k (blocks in schema order): what HDF5's chunk index says,
                                kept so that a reader need not walk it (~9 ms per dataset)
 
 Stack ``t`` of an episode is frames ``frame_start + t`` and ``frame_start + t + 1`` with step
@@ -28,7 +31,7 @@ import mmap
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import h5py
 import numpy as np
@@ -39,7 +42,8 @@ from sc2data.errors import Sc2DataError
 from sc2data.schema import Schema, SchemaError
 
 FORMAT = "sc2data-shard"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+"""2: frames stored in blocks of keys (1 had one dataset per key)."""
 ARG_WIDTH = max(sum(len(a.sizes) for a in f.args) for f in actions.FUNCTIONS)
 """Widest flattened argument list of any pysc2 function (select_rect: add, x0, y0, x1, y1)."""
 EPISODE_COLUMNS: tuple[str, ...] = ("episode", "env_seed", "agent_seed", "frame_start",
@@ -121,23 +125,33 @@ class ShardWriter:
             # Integers stay integers for any HDF5 tool; everything else is JSON, unambiguously.
             self._file.attrs[k] = v if type(v) is int else json.dumps(v)
         c = codec.chunk_frames
-        self._shapes: dict[str, tuple[int, ...]] = {
-            l.key: (schema.size(l.group),) * 2 for l in schema.layers}
-        self._shapes.update({v.name: (v.size,) for v in schema.vectors})
-        self._dtypes = {l.key: l.dtype for l in schema.layers}
-        self._dtypes.update({v.name: v.dtype for v in schema.vectors})
-        self._frames = {k: self._file.create_dataset(
-            f"frames/{k}", shape=(0, *self._shapes[k]), maxshape=(None, *self._shapes[k]),
-            dtype=self._dtypes[k], chunks=(c, *self._shapes[k]), **codec.dataset_kwargs())
-            for k in schema.keys()}
-        self._buffers = {k: np.zeros((c, *self._shapes[k]), self._dtypes[k]) for k in schema.keys()}
-        self._ids = [(self._frames[k].id, (0,) * len(self._shapes[k]), self._buffers[k])
-                     for k in schema.keys()]
-        self._groups = [(f"feature_{g}", np.array([l.index for l in schema.group(g)]),
-                         np.array([l.limit for l in schema.group(g)]),
-                         [self._buffers[l.key] for l in schema.group(g)], schema.group(g))
-                        for g in ("screen", "minimap") if schema.group(g)]
-        self._vectors = [(v.name, self._buffers[v.name]) for v in schema.vectors]
+        self._blocks = schema.blocks()
+        self._frames = {}
+        for b in self._blocks:
+            ds = self._file.create_dataset(
+                f"frames/{b.name}", shape=(0, *b.frame_shape), maxshape=(None, *b.frame_shape),
+                dtype=b.dtype, chunks=(c, *b.frame_shape), **codec.dataset_kwargs())
+            ds.attrs["keys"] = json.dumps(list(b.keys))
+            self._frames[b.name] = ds
+        self._buffers = {b.name: np.zeros((c, *b.frame_shape), b.dtype) for b in self._blocks}
+        self._ids = [(self._frames[b.name].id, (0,) * len(b.frame_shape), self._buffers[b.name])
+                     for b in self._blocks]
+        layer_of = {l.key: l for l in schema.layers}
+        # Per spatial block: the observation key, the pysc2 indices of its layers (a slice when
+        # they are consecutive: a view, no gather), the dtype's limit and the layers themselves.
+        self._spatial: list[tuple[str, np.ndarray | slice, int, np.ndarray, list[Any]]] = []
+        self._vectors: list[tuple[str, np.ndarray]] = []
+        for b in self._blocks:
+            buf = self._buffers[b.name]
+            if b.name.startswith("vectors_"):
+                self._vectors += [(k, buf[:, part]) for k, part in zip(b.keys, b.parts)]
+                continue
+            ls = [layer_of[k] for k in b.keys]
+            idx = np.array([l.index for l in ls])
+            sel: np.ndarray | slice = idx
+            if len(idx) and np.array_equal(idx, np.arange(idx[0], idx[0] + len(idx))):
+                sel = slice(int(idx[0]), int(idx[0]) + len(idx))
+            self._spatial.append((f"feature_{ls[0].group}", sel, ls[0].limit, buf, ls))
         self._encoder = ChunkEncoder(codec)
         self._n_frames = 0
         self._capacity = 0
@@ -158,35 +172,40 @@ class ShardWriter:
     def add_frame(self, arrays: Mapping[str, np.ndarray]) -> None:
         """Append one frame: ``arrays`` holds every schema key (``Schema.extract``'s output)."""
         slot = self._n_frames % self.codec.chunk_frames
-        for k, buf in self._buffers.items():
-            buf[slot] = arrays[k]
+        for b in self._blocks:
+            frame = self._buffers[b.name][slot]
+            for k, part in zip(b.keys, b.parts):
+                frame[part] = np.asarray(arrays[k]).reshape(frame[part].shape)
         self._next_frame()
 
     def add_observation(self, obs: Mapping[str, Any]) -> None:
         """Append one pysc2 observation: what ``add_frame(schema.extract(obs))`` does, with the
-        same lossless range check, but one vectorised check per group and no intermediate copy.
+        same lossless range check, but one vectorised check per block and no intermediate copy.
         """
         slot = self._n_frames % self.codec.chunk_frames
-        for obs_key, index, limit, buffers, layers in self._groups:
-            planes = np.asarray(obs[obs_key])
-            flat = planes.reshape(len(planes), -1)
+        for obs_key, sel, limit, buf, layers in self._spatial:
+            planes = np.asarray(obs[obs_key])[sel]
             if planes.dtype == np.int32:  # one pass: negatives read as unsigned exceed any limit
-                bad = flat.view(np.uint32).max(axis=1)[index] >= limit
+                bad = planes.view(np.uint32).max() >= limit
             else:
-                bad = (flat.max(axis=1)[index] >= limit) | (flat.min(axis=1)[index] < 0)
-            if bad.any():
-                l = layers[int(np.flatnonzero(bad)[0])]
-                plane = planes[l.index]
-                raise ObservationError(
-                    f"frame {self._n_frames - (self._current or {}).get('frame_start', 0)} of "
-                    f"episode {(self._current or {}).get('episode')}: {l.key} holds values "
-                    f"outside [0, {l.limit}) (min {plane.min()}, max {plane.max()}), which its "
-                    f"{l.dtype} cannot store losslessly")
-            for buf, i in zip(buffers, index.tolist()):
-                buf[slot] = planes[i]
+                bad = planes.max() >= limit or planes.min() < 0
+            if bad:
+                self._out_of_range(planes, limit, layers)
+            buf[slot] = planes
         for name, buf in self._vectors:
             buf[slot] = np.asarray(obs[name]).reshape(buf.shape[1:])
         self._next_frame()
+
+    def _out_of_range(self, planes: np.ndarray, limit: int, layers: list[Any]) -> NoReturn:
+        """Raise the error naming the first layer of ``planes`` outside ``[0, limit)``."""
+        flat = planes.reshape(len(planes), -1)
+        j = int(np.flatnonzero((flat.max(axis=1) >= limit) | (flat.min(axis=1) < 0))[0])
+        l, plane = layers[j], planes[j]
+        cur = self._current or {}
+        raise ObservationError(
+            f"frame {self._n_frames - cur.get('frame_start', 0)} of episode "
+            f"{cur.get('episode')}: {l.key} holds values outside [0, {l.limit}) (min "
+            f"{plane.min()}, max {plane.max()}), which its {l.dtype} cannot store losslessly")
 
     def _next_frame(self) -> None:
         self._n_frames += 1
@@ -253,7 +272,7 @@ class ShardWriter:
                                       chunks=(max(1, len(table)),), **kw)
         self._file.attrs["n_frames"] = self._n_frames
         self._file.attrs["n_steps"] = n
-        index = np.stack([chunk_table(self._frames[k]) for k in self.schema.keys()])
+        index = np.stack([chunk_table(self._frames[b.name]) for b in self._blocks])
         if index.size:
             self._file.create_dataset(CHUNK_INDEX, data=index, chunks=index.shape, **kw)
         self._file.close()
@@ -370,7 +389,7 @@ class Shard:
         self._index: dict[str, np.ndarray] | None = None
 
     def chunk_index(self) -> dict[str, np.ndarray]:
-        """The stored chunk index by frame key (empty for shards written before it existed)."""
+        """The stored chunk index by block name (empty when a shard has none)."""
         if self._index is None:
             self._index = {}
             if CHUNK_INDEX in self.file:
@@ -378,22 +397,25 @@ class Shard:
                     stored = self.file[CHUNK_INDEX][()]
                 except OSError as e:
                     raise _damaged(self.path, _first_line(e)) from None
-                keys = self.schema.keys()
-                if stored.ndim != 3 or len(stored) != len(keys):
+                names = [b.name for b in self.schema.blocks()]
+                if stored.ndim != 3 or len(stored) != len(names):
                     raise _damaged(self.path, "its chunk index does not fit its schema")
-                self._index = dict(zip(keys, stored))
+                self._index = dict(zip(names, stored))
         return self._index
 
-    def frames(self, key: str) -> FrameSource:
-        """The chunk reader of frame dataset ``key``."""
-        if key not in self._sources:
+    def frames(self, block: str) -> FrameSource:
+        """The chunk reader of frame dataset ``block`` (a :class:`~sc2data.schema.Block` name)."""
+        if block not in self._sources:
             if self._mm is None:
                 with open(self.path, "rb") as f:
                     self._mm = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
-            self._sources[key] = FrameSource(self.file[f"frames/{key}"], self._mm,
-                                             f"{self.path.name}:{key}",
-                                             self.chunk_index().get(key))
-        return self._sources[key]
+            try:
+                ds = self.file[f"frames/{block}"]
+            except KeyError:
+                raise _damaged(self.path, f"frames/{block} is missing") from None
+            self._sources[block] = FrameSource(ds, self._mm, f"{self.path.name}:frames/{block}",
+                                               self.chunk_index().get(block))
+        return self._sources[block]
 
     def steps(self) -> dict[str, np.ndarray]:
         """``function`` (S,), ``args`` (S, ARG_WIDTH) and ``reward`` (S,) of every step."""
@@ -423,6 +445,17 @@ def _first_line(e: BaseException) -> str:
     return str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
 
 
-__all__ = ["ARG_WIDTH", "CHUNK_INDEX", "ChecksumError", "FrameSource", "ObservationError",
-           "Shard", "ShardWriter", "chunk_table", "flatten_args", "function_call", "fsync_path",
-           "sha256_file"]
+__all__ = [
+    "ARG_WIDTH",
+    "CHUNK_INDEX",
+    "ChecksumError",
+    "FrameSource",
+    "ObservationError",
+    "Shard",
+    "ShardWriter",
+    "chunk_table",
+    "flatten_args",
+    "fsync_path",
+    "function_call",
+    "sha256_file",
+]

@@ -9,13 +9,14 @@ from sc2data.rollout import RolloutConfig, RolloutSummary, rollout
 from sc2data.synthetic import pysc2_random_agent, synthetic_env_factory
 
 STEPS = 30
-"""Steps per synthetic episode: 31 frames, so chunks (8 frames by default) straddle episodes."""
+"""Steps per synthetic episode: 31 frames, so chunks (4 frames by default) straddle episodes."""
 
 
 def config(episodes: int = 5, seed: int = 7, per_shard: int = 2,
            chunk_frames: int = Codec().chunk_frames, **kw: object) -> RolloutConfig:
     return RolloutConfig(env="sim", agent="random", episodes=episodes, seed=seed,
-                         episodes_per_shard=per_shard, codec=Codec(1, chunk_frames), **kw)
+                         episodes_per_shard=per_shard, codec=Codec(chunk_frames=chunk_frames),
+                         **kw)
 
 
 def make_dataset(out: Path, workers: int = 1, steps: int = STEPS, **kw: object) -> RolloutSummary:

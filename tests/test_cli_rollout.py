@@ -104,7 +104,7 @@ def test_verify_catches_a_flipped_byte(copy: Path, capsys: pytest.CaptureFixture
     flip_byte_in_chunk(copy / "shard-00001.h5", "screen/player_relative")
     code, _, err = cli(["verify", copy], capsys)
     assert code == 1
-    assert "shard-00001.h5:frames/screen/player_relative: unreadable chunk" in err
+    assert "shard-00001.h5:frames/screen_uint8: unreadable chunk" in err
     assert "shard-00001.h5: sha256" in err
     assert "shard-00000" not in err
 
@@ -120,6 +120,27 @@ def test_older_schema_version(copy: Path, capsys: pytest.CaptureFixture[str]) ->
     code, _, err = cli(["rollout", "--out", copy, "--env", "sim", "--agent", "random",
                         "--episodes", "3", "--seed", "7", "--episodes-per-shard", "2"], capsys)
     assert_one_line_error(code, err, "shard-00000.h5: schema version 0")
+
+
+def test_folder_of_an_older_format(copy: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A folder written before frames were stored in blocks (dataset and shard format 1):
+    every command refuses it in one line, naming the format, and a rerun changes nothing."""
+    manifest = json.loads((copy / "dataset.json").read_text())
+    (copy / "dataset.json").write_text(json.dumps({**manifest, "format_version": 1}))
+    before = {p.name: p.read_bytes() for p in copy.iterdir()}
+    for args in (["verify", copy], ["info", copy],
+                 ["rollout", "--out", copy, "--env", "sim", "--agent", "random", "--episodes",
+                  "3", "--seed", "7", "--episodes-per-shard", "2"]):
+        code, _, err = cli(args, capsys)
+        assert_one_line_error(code, err, "has dataset format 1, not 2; regenerate it")
+    assert {p.name: p.read_bytes() for p in copy.iterdir()} == before
+    (copy / "dataset.json").write_text(json.dumps(manifest))
+    with h5py.File(copy / "shard-00001.h5", "r+") as f:
+        f.attrs["format_version"] = 1
+    code, _, err = cli(["info", copy], capsys)
+    assert_one_line_error(code, err, "shard-00001.h5 has shard format 1, not 2; regenerate it")
+    code, _, err = cli(["verify", copy], capsys)
+    assert code == 1 and "shard-00001.h5 has shard format 1, not 2" in err
 
 
 def test_truncated_and_non_hdf5_shards(copy: Path, capsys: pytest.CaptureFixture[str]) -> None:

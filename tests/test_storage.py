@@ -93,7 +93,9 @@ def test_shard_roundtrip(tmp_path: Path) -> None:
         steps = shard.steps()
         for (frames, calls), f0, s0 in zip(episodes, (0, 6), (0, 5)):
             for k, v in frames.items():
-                np.testing.assert_array_equal(shard.file[f"frames/{k}"][f0:f0 + len(v)], v)
+                b = SCHEMA.block_of(k)
+                np.testing.assert_array_equal(
+                    shard.file[f"frames/{b.name}"][f0:f0 + len(v), b.part(k)], v)
             for t, call in enumerate(calls):
                 got = function_call(steps["function"][s0 + t], steps["args"][s0 + t])
                 assert got == call
@@ -108,9 +110,9 @@ def test_fast_path_equals_hdf5_path(tmp_path: Path) -> None:
     write_shard(path, lengths=(6, 6))
     shard = Shard(path)
     try:
-        for key in ("screen/unit_type", "minimap/camera", "player"):
-            fast = shard.frames(key)
-            slow = FrameSource(shard.file[f"frames/{key}"], None, key)
+        for block in SCHEMA.blocks():
+            fast = shard.frames(block.name)
+            slow = FrameSource(shard.file[f"frames/{block.name}"], None, block.name)
             ids = np.arange(-(-14 // 4))
             assert fast._mm is not None and slow._mm is None
             assert fast.read_chunks(ids) == slow.read_chunks(ids)
@@ -125,10 +127,10 @@ def test_shard_bytes_depend_only_on_content(tmp_path: Path) -> None:
 
 
 def flip_byte_in_chunk(path: Path, key: str, chunk: int = 1) -> None:
-    """Damage one byte in the middle of a stored frame chunk."""
+    """Damage one byte in the middle of a stored frame chunk of the block holding ``key``."""
     with h5py.File(path, "r") as f:
-        ds = f[f"frames/{key}"]
-        info = ds.id.get_chunk_info_by_coord((chunk * ds.chunks[0], 0, 0))
+        ds = f[f"frames/{SCHEMA.block_of(key).name}"]
+        info = ds.id.get_chunk_info_by_coord((chunk * ds.chunks[0],) + (0,) * (ds.ndim - 1))
     with open(path, "r+b") as f:
         f.seek(info.byte_offset + info.size // 2)
         b = f.read(1)
@@ -143,10 +145,10 @@ def test_flipped_byte_is_caught_by_both_paths(tmp_path: Path) -> None:
     shard = Shard(path)
     try:
         with pytest.raises(ChecksumError, match="checksum"):
-            shard.frames("screen/unit_type").read_chunks(np.array([1]))
+            shard.frames("screen_uint16").read_chunks(np.array([1]))
         with pytest.raises(OSError):
-            shard.file["frames/screen/unit_type"][4:8]
-        shard.frames("screen/unit_type").read_chunks(np.array([0, 2]))  # the others are fine
+            shard.file["frames/screen_uint16"][4:8]
+        shard.frames("screen_uint16").read_chunks(np.array([0, 2]))  # the others are fine
     finally:
         shard.close()
 
@@ -159,11 +161,11 @@ def test_reading_a_damaged_chunk_raises(dataset: Path, tmp_path: Path) -> None:
     flip_byte_in_chunk(copy / "shard-00000.h5", "screen/unit_hit_points", chunk=1)
     ds = sc2data.open_dataset(copy, cache_bytes=0)
     c = Codec().chunk_frames
-    with pytest.raises(ChecksumError, match=r"shard-00000.h5:screen/unit_hit_points: fletcher32"):
+    with pytest.raises(ChecksumError, match=r"shard-00000.h5:frames/screen_uint16: fletcher32"):
         ds.read([0], [c])
     with pytest.raises(Sc2DataError):
         ds.read([0], [c + 1], keys=["screen/unit_hit_points"])
-    ds.read([0], [c], keys=["screen/unit_type", "player"])
+    ds.read([0], [c], keys=["screen/player_id", "minimap/camera", "player"])  # other blocks
     ds.read([0, 1], [0, 5])
 
 
@@ -175,11 +177,12 @@ def test_the_stored_chunk_index_is_hdf5s(tmp_path: Path) -> None:
     shard = Shard(path)
     try:
         index = shard.chunk_index()
-        assert list(index) == list(SCHEMA.keys())
-        for key in SCHEMA.keys():
-            np.testing.assert_array_equal(index[key], chunk_table(shard.file[f"frames/{key}"]))
+        names = [b.name for b in SCHEMA.blocks()]
+        assert list(index) == names
+        for name in names:
+            np.testing.assert_array_equal(index[name], chunk_table(shard.file[f"frames/{name}"]))
         ids = np.arange(-(-17 // 4))
-        stored = {k: shard.frames(k).read_chunks(ids) for k in SCHEMA.keys()}
+        stored = {n: shard.frames(n).read_chunks(ids) for n in names}
     finally:
         shard.close()
     with h5py.File(path, "r+") as f:
@@ -187,7 +190,7 @@ def test_the_stored_chunk_index_is_hdf5s(tmp_path: Path) -> None:
     shard = Shard(path)
     try:
         assert shard.chunk_index() == {}
-        assert {k: shard.frames(k).read_chunks(ids) for k in SCHEMA.keys()} == stored
+        assert {n: shard.frames(n).read_chunks(ids) for n in names} == stored
     finally:
         shard.close()
 
@@ -200,13 +203,13 @@ def test_a_wrong_chunk_index_is_caught(dataset: Path, tmp_path: Path) -> None:
     copy = Path(shutil.copytree(dataset, tmp_path / "d"))
     with h5py.File(copy / "shard-00001.h5", "r+") as f:
         index = f[CHUNK_INDEX][()]
-        index[2, 1, 0] += 8  # chunk 1 of screen/creep: 8 bytes off
+        index[2, 1, 0] += 8  # chunk 1 of the minimap layers: 8 bytes off
         f[CHUNK_INDEX][...] = index
     faults = verify(copy)
-    assert "shard-00001.h5:chunk_index: disagrees with HDF5's chunk index of frames/screen/creep" \
-        in faults
+    assert "shard-00001.h5:chunk_index: disagrees with HDF5's chunk index of " \
+        "frames/minimap_uint8" in faults
     ds = sc2data.open_dataset(copy, cache_bytes=0)
-    with pytest.raises(ChecksumError, match="shard-00001.h5:screen/creep"):
+    with pytest.raises(ChecksumError, match="shard-00001.h5:frames/minimap_uint8"):
         ds.read([2], [Codec().chunk_frames])
 
 
@@ -216,6 +219,15 @@ def test_shard_of_another_schema_version_is_refused(tmp_path: Path) -> None:
     with h5py.File(path, "r+") as f:
         f.attrs["schema"] = json.dumps({**SCHEMA.to_dict(), "version": 0})
     with pytest.raises(Sc2DataError, match="schema version 0"):
+        Shard(path)
+
+
+def test_shard_of_an_older_format_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / "s.h5"
+    write_shard(path)
+    with h5py.File(path, "r+") as f:
+        f.attrs["format_version"] = 1
+    with pytest.raises(Sc2DataError, match="has shard format 1, not 2; regenerate it"):
         Shard(path)
 
 

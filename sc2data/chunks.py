@@ -92,10 +92,20 @@ class ChunkEncoder:
     def __init__(self, codec: Codec) -> None:
         self._zstd = zstandard.ZstdCompressor(level=codec.level)
 
-    def encode(self, blocks: Sequence[np.ndarray]) -> list[bytes]:
-        compressed = [self._zstd.compress(np.ascontiguousarray(b).data) for b in blocks]
+    def compress(self, blocks: Sequence[np.ndarray]) -> list[bytes]:
+        """Zstd frames of ``blocks``, not yet checksummed (see :meth:`seal`)."""
+        return [self._zstd.compress(np.ascontiguousarray(b).data) for b in blocks]
+
+    @staticmethod
+    def seal(compressed: Sequence[bytes]) -> list[bytes]:
+        """Append each payload's fletcher32, as HDF5 stores it. One vectorised pass, so the
+        writer seals many flushes' chunks at once (per flush it cost ≈ 7 µs a frame)."""
         sums = fletcher32(compressed)
         return [c + int(s).to_bytes(4, "little") for c, s in zip(compressed, sums, strict=True)]
+
+    def encode(self, blocks: Sequence[np.ndarray]) -> list[bytes]:
+        """Compressed and sealed HDF5 chunk payloads of ``blocks``."""
+        return self.seal(self.compress(blocks))
 
 
 class ChunkDecoder:

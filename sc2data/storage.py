@@ -50,6 +50,8 @@ EPISODE_COLUMNS: tuple[str, ...] = ("episode", "env_seed", "agent_seed", "frame_
                                     "step_start", "n_steps", "reward")
 _GROW = 256
 """Chunks added at a time when a frame dataset must grow."""
+_SEAL_EVERY = 64
+"""Flushes whose compressed chunks are checksummed and written together (a few hundred KB)."""
 CHUNK_INDEX = "chunk_index"
 
 
@@ -108,7 +110,8 @@ def sha256_file(path: Path) -> str:
 
 
 class ShardWriter:
-    """Streams the episodes of one shard into ``path``; memory use is one chunk of frames.
+    """Streams the episodes of one shard into ``path``; memory use is one chunk of frames and
+    the compressed chunks of up to ``_SEAL_EVERY`` flushes.
 
     Call :meth:`begin_episode`, then :meth:`add_frame` T+1 times and :meth:`add_step` T times,
     then :meth:`end_episode`; :meth:`close` writes the tables and fsyncs the file.
@@ -153,6 +156,7 @@ class ShardWriter:
                 sel = slice(int(idx[0]), int(idx[0]) + len(idx))
             self._spatial.append((f"feature_{ls[0].group}", sel, ls[0].limit, buf, ls))
         self._encoder = ChunkEncoder(codec)
+        self._pending: list[tuple[int, list[bytes]]] = []
         self._n_frames = 0
         self._capacity = 0
         self._functions: list[int] = []
@@ -241,9 +245,17 @@ class ShardWriter:
             self._capacity += _GROW * c
             for ds in self._frames.values():
                 ds.resize(self._capacity, axis=0)
-        payloads = self._encoder.encode([buf for _, _, buf in self._ids])
-        for (dsid, zeros, _), payload in zip(self._ids, payloads, strict=True):
-            dsid.write_direct_chunk((start, *zeros), payload)
+        self._pending.append((start, self._encoder.compress([buf for _, _, buf in self._ids])))
+        if len(self._pending) == _SEAL_EVERY:
+            self._write_pending()
+
+    def _write_pending(self) -> None:
+        """Checksum the compressed chunks of the last flushes together and write them."""
+        sealed = iter(self._encoder.seal([p for _, ps in self._pending for p in ps]))
+        for start, _ in self._pending:
+            for dsid, zeros, _ in self._ids:
+                dsid.write_direct_chunk((start, *zeros), next(sealed))
+        self._pending.clear()
 
     def close(self) -> None:
         """Write the last chunk, the step and episode tables; trim; fsync."""
@@ -254,6 +266,7 @@ class ShardWriter:
             for buf in self._buffers.values():
                 buf[filled:] = 0
             self._flush()
+        self._write_pending()
         for ds in self._frames.values():
             ds.resize(self._n_frames, axis=0)
         kw = self.codec.dataset_kwargs()

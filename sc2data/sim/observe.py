@@ -71,6 +71,25 @@ def stamp(cx: np.ndarray, cy: np.ndarray, radius: float, size: int
     return n, flat, d2[keep] <= radius * radius, cov[keep]
 
 
+def stamp_many(cx: np.ndarray, cy: np.ndarray, radii: np.ndarray, size: int
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`stamp` for disks of several radii, unit by unit in the order given.
+
+    One :func:`stamp` call per distinct radius; the pixels are then put back in unit order
+    (each unit's own in ``stamp``'s order), so a later unit overwrites an earlier one when
+    assigned, and each pixel's coverage is summed in unit order by ``np.bincount``, exactly as
+    stamping the units one at a time would.
+    """
+    parts = [(np.zeros(0, np.intp), np.zeros(0, np.int64), np.zeros(0, bool), np.zeros(0))]
+    for r in np.unique(radii):
+        group = np.flatnonzero(radii == r)
+        n, flat, disk, cov = stamp(cx[group], cy[group], float(r), size)
+        parts.append((group[n], flat, disk, cov))
+    unit, flat, disk, cov = (np.concatenate(p) for p in zip(*parts))
+    order = np.argsort(unit, kind="stable")
+    return unit[order], flat[order], disk[order], cov[order]
+
+
 class DiskStamp:
     """Disk pixels of one radius for many moving units, from precomputed sub-pixel tables.
 
@@ -194,7 +213,7 @@ class Renderer:
         self._ids_for: np.ndarray | None = None
         self._ids_cached = np.zeros(0, dtype=np.intp)
         self._mm_key: tuple[int, int] = (-1, -1)
-        self._mm_cached = self.minimap_base
+        self._mm_cached = self.minimap_base.copy()
         self._attr = np.zeros((7, 1), dtype=np.int32)
         self.hp = np.zeros(0)
         self.progress = np.zeros(0)
@@ -217,16 +236,14 @@ class Renderer:
         for layer, to_px, scale, rmin in ((self._s_static, md.world_to_screen, md.PX_PER_UNIT, 0.0),
                                           (self._m_static, md.world_to_minimap, _NM / md.MAP_SIZE,
                                            MINIMAP_MIN_RADIUS)):
+            cx, cy = to_px(tab.x1[slots], tab.y1[slots])
+            radii = np.maximum(tab.radius[slots] * scale, rmin)
+            unit, flat, disk, cov = stamp_many(cx, cy, radii, layer.size)
+            size2 = layer.size ** 2
             layer.top[:] = 0
-            layer.density[:] = 0
-            layer.aa[:] = 0.0
-            for s in slots:
-                cx, cy = to_px(tab.x1[s], tab.y1[s])
-                r = max(tab.radius[s] * scale, rmin)
-                _, flat, disk, cov = stamp(np.array([cx]), np.array([cy]), r, layer.size)
-                layer.top[flat[disk]] = s + 1
-                layer.density += np.bincount(flat[disk], minlength=layer.size ** 2)
-                layer.aa += np.bincount(flat, weights=cov, minlength=layer.size ** 2)
+            layer.top[flat[disk]] = (slots + 1)[unit[disk]]  # later units overwrite earlier
+            layer.density[:] = np.bincount(flat[disk], minlength=size2)
+            layer.aa[:] = np.bincount(flat, weights=cov, minlength=size2)
         d = self._s_disk
         self._s_canvas = np.zeros(d.sentinel + 1, dtype=np.intp)
         d.crop(self._s_canvas)[...] = self._s_static.top[:-1].reshape(_N, _N)
@@ -289,11 +306,15 @@ class Renderer:
         changes), then each ground unit on the pixel it stands in, later tags on top."""
         key = (g.grid_version, g.selection_version)
         if key != self._mm_key:
-            cached = self.minimap_base.copy()
-            cflat = cached.reshape(len(M), _NM * _NM)
-            for row, layer in enumerate(_UNIT_MINIMAP):
-                attr[row].take(self._m_static.top[:-1], out=cflat[layer], mode="clip")
-            self._mm_cached, self._mm_key = cached, key
+            if key[0] != self._mm_key[0]:
+                self._mm_cached = self.minimap_base.copy()
+                rows = list(range(len(_UNIT_MINIMAP)))
+            else:  # only the selection changed: redraw just the row that shows it
+                rows = [_UNIT_MINIMAP.index(M.selected.index)]
+            cflat = self._mm_cached.reshape(len(M), _NM * _NM)  # never handed out: editable
+            for row in rows:
+                attr[row].take(self._m_static.top[:-1], out=cflat[_UNIT_MINIMAP[row]], mode="clip")
+            self._mm_key = key
         minimap = self._mm_cached.copy()
         if len(slots):
             ms = _NM / md.MAP_SIZE

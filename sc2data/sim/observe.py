@@ -216,6 +216,8 @@ class Renderer:
         self._mm_cached = self.minimap_base.copy()
         self._attr = np.zeros((7, 1), dtype=np.int32)
         self.hp = np.zeros(0)
+        self._attr_key: tuple[object, int] | None = None
+        self._progressing = True
         self.progress = np.zeros(0)
 
     # ------------------------------------------------------------------ static part
@@ -291,6 +293,11 @@ class Renderer:
     def _attributes(self, g: Game, t: float) -> np.ndarray:
         """The table's per-slot layer values with hit points, ratio and progress at ``t``."""
         tab = g.table
+        # Unchanged columns and nothing under construction give last frame's values again
+        # (progress only grows, and stays clipped at 1 once there): about half the frames.
+        key = (tab, tab.version)
+        if key == self._attr_key and not self._progressing:
+            return tab.attr
         prog = np.minimum(tab.prog0 + tab.prate * (t - tab.pt0), 1.0)
         hp = np.maximum(tab.hpmax * (0.1 + 0.9 * prog) - tab.dmg, 0.0)
         a = tab.attr
@@ -298,6 +305,8 @@ class Renderer:
         a[5, 1:] = hp * tab.ratio_k
         a[6, 1:] = (prog < 1.0) * (prog * 255.0)
         self.hp, self.progress = hp, prog
+        self._attr_key = key
+        self._progressing = bool(((tab.prate != 0.0) & (prog < 1.0)).any())
         return a
 
     def _minimap(self, g: Game, attr: np.ndarray, slots: np.ndarray, wx: np.ndarray,

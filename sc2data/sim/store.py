@@ -233,7 +233,7 @@ class UnitTable:
 
     def positions(self, slots: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
         """World positions of ``slots`` at loop ``t``."""
-        x0, y0, t0, x1, y1, t1 = self.f[:6, slots]
+        x0, y0, t0, x1, y1, t1 = self.f[:6].take(slots, axis=1)
         f = np.minimum(np.maximum((t - t0) / np.maximum(t1 - t0, 1e-9), 0.0), 1.0)
         return x0 + (x1 - x0) * f, y0 + (y1 - y0) * f
 

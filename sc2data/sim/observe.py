@@ -222,9 +222,9 @@ class Renderer:
         self._mm_cached = self.minimap_base.copy()
         self._attr = np.zeros((7, 1), dtype=np.int32)
         self.hp = np.zeros(0)
-        self._attr_key: tuple[object, int] | None = None
-        self._progressing = True
         self.progress = np.zeros(0)
+        self._attr_key: tuple[object, int] | None = None  # (table, its version) drawn last
+        self._progressing = True  # whether something was being built then
 
     # ------------------------------------------------------------------ static part
 

@@ -26,6 +26,23 @@ _S = features.SCREEN_FEATURES
 _SELF = features.PlayerRelative.SELF
 
 
+def _type_table(types: tuple[int, ...]) -> np.ndarray:
+    """A lookup table ``t`` with ``t.take(unit_type, mode="clip")`` = ``np.isin(unit_type, types)``.
+
+    One ``take`` instead of ``np.isin``'s sort (~15× faster on a 64×64 layer). The last entry is
+    False and beyond every pysc2 unit id, so ids the table doesn't know (clipped to it) are False.
+    """
+    largest = max(int(u) for race in (units.Neutral, units.Protoss, units.Terran, units.Zerg)
+                  for u in race)
+    table = np.zeros(largest + 2, bool)
+    table[list(types)] = True
+    return table
+
+
+_IS_MINERAL = _type_table(MINERAL_TYPES)
+_IS_MOBILE = _type_table(MOBILE_TYPES)
+
+
 def _rows(a: Any) -> np.ndarray:
     """A (n, 7) unit table without pysc2's all-zero padding rows."""
     a = np.asarray(a).reshape(-1, len(features.UnitLayer))
@@ -92,7 +109,7 @@ class ScreenView:
         return mask & (self.player_relative == _SELF)
 
     def minerals(self) -> np.ndarray:
-        return np.isin(self.unit_type, MINERAL_TYPES)
+        return _IS_MINERAL.take(self.unit_type, mode="clip")
 
     @staticmethod
     def near(mask: np.ndarray, px: int) -> np.ndarray:
@@ -110,7 +127,7 @@ class ScreenView:
             r = (size / 2 + 0.5) * self.px_per_unit
             h = max(0, math.ceil(r - 0.5))
             blocked = ~self.buildable | ((self.unit_type != 0)
-                                         & ~np.isin(self.unit_type, MOBILE_TYPES))
+                                         & ~_IS_MOBILE.take(self.unit_type, mode="clip"))
             self._placements[size] = _box_clear(blocked, h)
         return self._placements[size]
 
@@ -177,12 +194,26 @@ def _blobs(packed: bytes, shape: tuple[int, int]) -> tuple[np.ndarray, ...]:
 
 
 def _box_clear(blocked: np.ndarray, h: int, off_screen: int = 1) -> np.ndarray:
-    """Pixels whose (2h+1)² neighbourhood holds no blocked pixel (nor off-screen, by default)."""
-    pad = np.pad(blocked.astype(np.int32), h, constant_values=off_screen)
+    """Pixels whose (2h+1)² neighbourhood holds no blocked pixel (nor off-screen, by default).
+
+    Cached by the mask's content, as :func:`_blobs` is (the result is read-only): the masks asked
+    about (structures, mineral fields) change far less often than the agent steps.
+    """
+    blocked = np.ascontiguousarray(blocked, bool)
+    return _box_clear_packed(blocked.tobytes(), blocked.shape, h, off_screen)
+
+
+@functools.lru_cache(maxsize=256)
+def _box_clear_packed(packed: bytes, shape: tuple[int, int], h: int, off_screen: int
+                      ) -> np.ndarray:
+    rows, cols = shape
+    pad = np.full((rows + 2 * h, cols + 2 * h), off_screen, np.int32)
+    pad[h:h + rows, h:h + cols] = np.frombuffer(packed, bool).reshape(shape)
     ii = np.zeros((pad.shape[0] + 1, pad.shape[1] + 1), np.int32)
     ii[1:, 1:] = pad.cumsum(0).cumsum(1)
     n = 2 * h + 1
-    rows, cols = blocked.shape
     box = (ii[n:n + rows, n:n + cols] - ii[:rows, n:n + cols]
            - ii[n:n + rows, :cols] + ii[:rows, :cols])
-    return box == 0
+    out = box == 0
+    out.flags.writeable = False
+    return out

@@ -71,14 +71,33 @@ def stamp(cx: np.ndarray, cy: np.ndarray, radius: float, size: int
     return n, flat, d2[keep] <= radius * radius, cov[keep]
 
 
+def stamp_many(cx: np.ndarray, cy: np.ndarray, radii: np.ndarray, size: int
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`stamp` for disks of several radii, unit by unit in the order given.
+
+    One :func:`stamp` call per distinct radius; the pixels are then put back in unit order
+    (each unit's own in ``stamp``'s order), so a later unit overwrites an earlier one when
+    assigned, and each pixel's coverage is summed in unit order by ``np.bincount``, exactly as
+    stamping the units one at a time would.
+    """
+    parts = [(np.zeros(0, np.intp), np.zeros(0, np.int64), np.zeros(0, bool), np.zeros(0))]
+    for r in np.unique(radii):
+        group = np.flatnonzero(radii == r)
+        n, flat, disk, cov = stamp(cx[group], cy[group], float(r), size)
+        parts.append((group[n], flat, disk, cov))
+    unit, flat, disk, cov = (np.concatenate(p) for p in zip(*parts))
+    order = np.argsort(unit, kind="stable")
+    return unit[order], flat[order], disk[order], cov[order]
+
+
 class DiskStamp:
     """Disk pixels of one radius for many moving units, from precomputed sub-pixel tables.
 
     A unit's centre is split into a whole pixel and a sub-pixel offset quantised to 1/16 px
-    (0.02 world units on the screen); for each of the 16×16 offsets the disk mask and coverage
-    of the surrounding window are tabulated once, so a frame costs a few array operations
-    whatever the number of units. Pixels are addressed on a canvas padded by ``pad`` on every
-    side, so units at the screen's edge need no bounds checks (the caller crops).
+    (0.02 world units on the screen); for each of the 16×16 offsets the disk's pixels and the
+    pixels of non-zero coverage around it are tabulated once, so a frame costs a few array
+    operations whatever the number of units. Pixels are addressed on a canvas padded by ``pad``
+    on every side, so units at the screen's edge need no bounds checks (the caller crops).
     """
 
     Q = 16
@@ -94,23 +113,42 @@ class DiskStamp:
         d1 = o[None, :] - radius - q[:, None]  # (Q, w): pixel centre − unit centre
         d2 = d1[:, None, :, None] ** 2 + d1[None, :, None, :] ** 2  # (Qy, Qx, wy, wx)
         d2 = d2.reshape(self.Q * self.Q, w * w)
-        self.disk = d2 <= radius * radius
-        self.cov = np.clip(radius + 0.5 - np.sqrt(d2), 0.0, 1.0)
+        disk = d2 <= radius * radius
+        cov = np.clip(radius + 0.5 - np.sqrt(d2), 0.0, 1.0)
         oy, ox = np.divmod(np.arange(w * w), w)
-        self.offsets = np.broadcast_to(oy * self.width + ox, (self.Q * self.Q, w * w)).copy()
+        window = oy * self.width + ox  # canvas offset of each window pixel from its corner
         self.sentinel = self.width * self.width
+        # Per sub-pixel offset, only the window pixels that matter, in window order: a disk of
+        # radius 1 px covers 3–5 of the 5×5 window, its coverage ~12. Rows are padded to one
+        # length: disk rows with an offset past the canvas (clipped to the sentinel), coverage
+        # rows with coverage 0 on the window's corner (adding 0 changes no sum).
+        n_disk, n_cov = disk.sum(1).max(), (cov > 0).sum(1).max()
+        self.disk_offsets = np.full((self.Q * self.Q, n_disk), self.sentinel, dtype=np.intp)
+        self.cov_offsets = np.zeros((self.Q * self.Q, n_cov), dtype=np.intp)
+        self.cov = np.zeros((self.Q * self.Q, n_cov))
+        for v in range(self.Q * self.Q):
+            inside, covered = np.flatnonzero(disk[v]), np.flatnonzero(cov[v] > 0)
+            self.disk_offsets[v, :len(inside)] = window[inside]
+            self.cov_offsets[v, :len(covered)] = window[covered]
+            self.cov[v, :len(covered)] = cov[v, covered]
         self._qoff = (pad - radius - 0.5) * self.Q
         self._qmax = (self.width - w) * self.Q - 1
 
-    def __call__(self, cx: np.ndarray, cy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """For units at screen pixel coordinates (cx, cy): (canvas pixel inside the disk or the
-        sentinel, canvas pixel of the window, coverage), each (N, window²)."""
-        qx = np.minimum(np.maximum(cx * self.Q + self._qoff, 0), self._qmax).astype(np.intp)
-        qy = np.minimum(np.maximum(cy * self.Q + self._qoff, 0), self._qmax).astype(np.intp)
-        v = (qy & (self.Q - 1)) * self.Q + (qx & (self.Q - 1))
-        base = (qy >> 4) * self.width + (qx >> 4)
-        flat = base[:, None] + self.offsets[v]
-        return np.where(self.disk[v], flat, self.sentinel), flat, self.cov[v]
+    def __call__(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """For units at screen pixel coordinates ``xy`` (a (2, N) array of x and y): canvas
+        pixels inside the disks (or the sentinel), canvas pixels of their coverage and that
+        coverage, each (N, row length)."""
+        # x and y go through each step together, as one (2, N) array: half the numpy calls.
+        q = xy * float(self.Q)
+        q += self._qoff
+        np.maximum(q, 0.0, out=q)
+        np.minimum(q, self._qmax, out=q)
+        q = q.astype(np.intp)
+        sub, whole = q & (self.Q - 1), q >> 4  # sub-pixel offset, whole pixel
+        v = sub[1] * self.Q + sub[0]
+        base = (whole[1] * self.width + whole[0])[:, None]
+        inside = np.minimum(base + self.disk_offsets[v], self.sentinel)
+        return inside, base + self.cov_offsets[v], self.cov[v]
 
     def crop(self, canvas: np.ndarray) -> np.ndarray:
         """The ``size``² image inside a flat padded canvas (sentinel entry ignored)."""
@@ -169,19 +207,24 @@ class Renderer:
         self.minimap_base[M.height_map.index] = np.where(m_play, md.HEIGHT_VALUE, 0)
         self.minimap_base[M.visibility_map.index] = np.where(m_play, 2, 0)
         self.minimap_base[M.camera.index] = md.camera_minimap_mask()
-        drawn = set(_UNIT_SCREEN) | {S.unit_density.index, S.unit_density_aa.index}
-        self._screen_static_runs = _runs([i for i in range(len(S)) if i not in drawn])
+        # The screen's only non-zero rows that are not drawn from units (the rest stay 0).
+        self._terrain_runs = _runs(sorted([S.height_map.index, S.visibility_map.index,
+                                           S.pathable.index, S.buildable.index]))
         self._version = -1
         self._s_static = _Layer(_N)
         self._m_static = _Layer(_NM)
         small = md.UNIT_DATA[md.SCV].radius  # every ground unit here: SCV and Marine, 0.375
         self._s_disk = DiskStamp(small * md.PX_PER_UNIT, _N)
         self._s_canvas = np.zeros(self._s_disk.sentinel + 1, dtype=np.intp)
+        self._ids_for: np.ndarray | None = None
+        self._ids_cached = np.zeros(0, dtype=np.intp)
         self._mm_key: tuple[int, int] = (-1, -1)
-        self._mm_cached = self.minimap_base
+        self._mm_cached = self.minimap_base.copy()
         self._attr = np.zeros((7, 1), dtype=np.int32)
         self.hp = np.zeros(0)
         self.progress = np.zeros(0)
+        self._attr_key: tuple[object, int] | None = None  # (table, its version) drawn last
+        self._progressing = True  # whether something was being built then
 
     # ------------------------------------------------------------------ static part
 
@@ -201,41 +244,66 @@ class Renderer:
         for layer, to_px, scale, rmin in ((self._s_static, md.world_to_screen, md.PX_PER_UNIT, 0.0),
                                           (self._m_static, md.world_to_minimap, _NM / md.MAP_SIZE,
                                            MINIMAP_MIN_RADIUS)):
+            cx, cy = to_px(tab.x1[slots], tab.y1[slots])
+            radii = np.maximum(tab.radius[slots] * scale, rmin)
+            unit, flat, disk, cov = stamp_many(cx, cy, radii, layer.size)
+            size2 = layer.size ** 2
             layer.top[:] = 0
-            layer.density[:] = 0
-            layer.aa[:] = 0.0
-            for s in slots:
-                cx, cy = to_px(tab.x1[s], tab.y1[s])
-                r = max(tab.radius[s] * scale, rmin)
-                _, flat, disk, cov = stamp(np.array([cx]), np.array([cy]), r, layer.size)
-                layer.top[flat[disk]] = s + 1
-                layer.density += np.bincount(flat[disk], minlength=layer.size ** 2)
-                layer.aa += np.bincount(flat, weights=cov, minlength=layer.size ** 2)
+            layer.top[flat[disk]] = (slots + 1)[unit[disk]]  # later units overwrite earlier
+            layer.density[:] = np.bincount(flat[disk], minlength=size2)
+            layer.aa[:] = np.bincount(flat, weights=cov, minlength=size2)
         d = self._s_disk
         self._s_canvas = np.zeros(d.sentinel + 1, dtype=np.intp)
         d.crop(self._s_canvas)[...] = self._s_static.top[:-1].reshape(_N, _N)
 
     # ------------------------------------------------------------------ frame
 
-    def _screen_units(self, slots: np.ndarray, cx: np.ndarray, cy: np.ndarray
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Screen top-unit image (slot + 1, flat), density and coverage: static + ground."""
+    def _screen(self, slots: np.ndarray, xy: np.ndarray, attr: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+        """``feature_screen`` and its top-unit image (slot + 1, flat): the cached terrain and
+        structures, with the ground units at screen pixel coordinates ``xy`` (2, N) on top."""
         disk = self._s_disk
-        fd, fa, cov = disk(cx, cy)
+        inside, covered, cov = disk(xy)
         canvas = self._s_canvas.copy()
         # Later (higher-tag) units overwrite earlier ones: numpy assigns repeated indices in
-        # order, and the sentinel entry takes the window pixels outside the disks.
-        canvas[fd.ravel()] = np.repeat(slots + 1, fd.shape[1])
+        # order, and the sentinel entry takes the padding entries of the disk rows.
+        canvas[inside.ravel()] = self._ids(slots, inside.shape[1])
         top = disk.crop(canvas).ravel()
+        # Zeroed memory (calloc) and the few terrain rows copied: cheaper than copying every
+        # row of screen_base, most of which are always 0.
+        screen = np.zeros(self.screen_base.shape, np.int32)
+        for lo, hi in self._terrain_runs:
+            screen[lo:hi] = self.screen_base[lo:hi]
+        flat = screen.reshape(len(S), _N * _N)
+        for row, layer in enumerate(_UNIT_SCREEN):
+            attr[row].take(top, out=flat[layer], mode="clip")
+        # Density and coverage are summed in int64 / float64 and cast into the int32 rows by the
+        # last operation itself (``casting="unsafe"``: what assigning them would do).
         n = disk.sentinel + 1
-        density = disk.crop(np.bincount(fd.ravel(), minlength=n)) + self._s_static.density2d
-        aa = disk.crop(np.bincount(fa.ravel(), weights=cov.ravel(), minlength=n)) + \
+        np.add(disk.crop(np.bincount(inside.ravel(), minlength=n)), self._s_static.density2d,
+               out=screen[S.unit_density.index], casting="unsafe")
+        aa = disk.crop(np.bincount(covered.ravel(), weights=cov.ravel(), minlength=n)) + \
             self._s_static.aa2d
-        return top, density, aa
+        aa *= 16.0
+        aa += 0.5
+        np.minimum(aa, 255.0, out=screen[S.unit_density_aa.index], casting="unsafe")
+        return screen, top
+
+    def _ids(self, slots: np.ndarray, k: int) -> np.ndarray:
+        """``slot + 1`` of each ground unit repeated ``k`` times (cached: it changes only when a
+        ground unit is made or dies)."""
+        if self._ids_for is not slots:
+            self._ids_cached, self._ids_for = np.repeat(slots + 1, k), slots
+        return self._ids_cached
 
     def _attributes(self, g: Game, t: float) -> np.ndarray:
         """The table's per-slot layer values with hit points, ratio and progress at ``t``."""
         tab = g.table
+        # Unchanged columns and nothing under construction give last frame's values again
+        # (progress only grows, and stays clipped at 1 once there): about half the frames.
+        key = (tab, tab.version)
+        if key == self._attr_key and not self._progressing:
+            return tab.attr
         prog = np.minimum(tab.prog0 + tab.prate * (t - tab.pt0), 1.0)
         hp = np.maximum(tab.hpmax * (0.1 + 0.9 * prog) - tab.dmg, 0.0)
         a = tab.attr
@@ -243,6 +311,8 @@ class Renderer:
         a[5, 1:] = hp * tab.ratio_k
         a[6, 1:] = (prog < 1.0) * (prog * 255.0)
         self.hp, self.progress = hp, prog
+        self._attr_key = key
+        self._progressing = bool(((tab.prate != 0.0) & (prog < 1.0)).any())
         return a
 
     def _minimap(self, g: Game, attr: np.ndarray, slots: np.ndarray, wx: np.ndarray,
@@ -251,11 +321,15 @@ class Renderer:
         changes), then each ground unit on the pixel it stands in, later tags on top."""
         key = (g.grid_version, g.selection_version)
         if key != self._mm_key:
-            cached = self.minimap_base.copy()
-            cflat = cached.reshape(len(M), _NM * _NM)
-            for row, layer in enumerate(_UNIT_MINIMAP):
-                attr[row].take(self._m_static.top[:-1], out=cflat[layer], mode="clip")
-            self._mm_cached, self._mm_key = cached, key
+            if key[0] != self._mm_key[0]:
+                self._mm_cached = self.minimap_base.copy()
+                rows = list(range(len(_UNIT_MINIMAP)))
+            else:  # only the selection changed: redraw just the row that shows it
+                rows = [_UNIT_MINIMAP.index(M.selected.index)]
+            cflat = self._mm_cached.reshape(len(M), _NM * _NM)  # never handed out: editable
+            for row in rows:
+                attr[row].take(self._m_static.top[:-1], out=cflat[_UNIT_MINIMAP[row]], mode="clip")
+            self._mm_key = key
         minimap = self._mm_cached.copy()
         if len(slots):
             ms = _NM / md.MAP_SIZE
@@ -276,16 +350,9 @@ class Renderer:
         wx, wy = g.table.positions(slots, t)
         attr = self._attributes(g, t)
 
-        sx = (wx - md.SCREEN_X0) * md.PX_PER_UNIT
-        sy = (md.SCREEN_Y0 - wy) * md.PX_PER_UNIT
-        top, density, aa = self._screen_units(slots, sx, sy)
-        screen = np.empty_like(self.screen_base)
-        for lo, hi in self._screen_static_runs:  # terrain rows and the always-zero rows
-            screen[lo:hi] = self.screen_base[lo:hi]
-        flat = screen.reshape(len(S), _N * _N)
-        for row, layer in enumerate(_UNIT_SCREEN):
-            attr[row].take(top, out=flat[layer], mode="clip")
-        screen[S.unit_density.index] = density
-        np.minimum(aa * 16.0 + 0.5, 255.0, out=aa)
-        screen[S.unit_density_aa.index] = aa
+        xy = np.empty((2, len(slots)))  # screen pixel coordinates: x right, y down
+        np.subtract(wx, md.SCREEN_X0, out=xy[0])
+        np.subtract(md.SCREEN_Y0, wy, out=xy[1])
+        xy *= md.PX_PER_UNIT
+        screen, top = self._screen(slots, xy, attr)
         return screen, self._minimap(g, attr, slots, wx, wy), top.reshape(_N, _N)

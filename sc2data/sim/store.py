@@ -165,6 +165,9 @@ class UnitTable:
 
     def __init__(self, capacity: int = 512) -> None:
         self.capacity = 0
+        self.version = 0
+        """Bumped whenever a unit is added or removed or its progress/damage columns change: the
+        drawing recomputes hit points and progress only then, or while something is built."""
         self.alive = np.zeros(0, dtype=bool)
         self.f = np.zeros((len(self.FLOAT_COLS), 0), dtype=np.float64)
         self.i = np.zeros((len(self.INT_COLS), 0), dtype=np.int64)
@@ -175,6 +178,7 @@ class UnitTable:
         self._grow(capacity)
 
     def _grow(self, extra: int) -> None:
+        self.version += 1
         old = self.capacity
         self.capacity = old + extra
         self.alive = np.concatenate([self.alive, np.zeros(extra, dtype=bool)])
@@ -197,6 +201,7 @@ class UnitTable:
 
     def add(self, u: Unit) -> None:
         """Mirror a new unit into its slot."""
+        self.version += 1
         s = u.slot
         d = u.data
         self.alive[s] = True
@@ -210,6 +215,7 @@ class UnitTable:
             self._ground_arr = None
 
     def remove(self, u: Unit) -> None:
+        self.version += 1
         s = u.slot
         self.alive[s] = False
         self.attr[:, s + 1] = 0
@@ -227,7 +233,7 @@ class UnitTable:
 
     def positions(self, slots: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
         """World positions of ``slots`` at loop ``t``."""
-        x0, y0, t0, x1, y1, t1 = self.f[:6, slots]
+        x0, y0, t0, x1, y1, t1 = self.f[:6].take(slots, axis=1)
         f = np.minimum(np.maximum((t - t0) / np.maximum(t1 - t0, 1e-9), 0.0), 1.0)
         return x0 + (x1 - x0) * f, y0 + (y1 - y0) * f
 
@@ -235,6 +241,7 @@ class UnitTable:
         self.f[:6, u.slot] = (u.x0, u.y0, u.t0, u.x1, u.y1, u.t1)
 
     def build(self, u: Unit) -> None:
+        self.version += 1
         self.f[6:10, u.slot] = (u.prog0, u.pt0, u.prate, u.dmg)
 
     def snapshot(self) -> dict[str, Any]:

@@ -37,7 +37,7 @@ def test_3x3_building_is_about_10x10() -> None:
                              md.UNIT_DATA[md.BARRACKS].radius * md.PX_PER_UNIT, 64)
     assert 70 <= disk.sum() <= 80  # 73–80 px measured
     small = DiskStamp(0.375 * md.PX_PER_UNIT, 64)
-    fd, _, cov = small(np.array([10.0]), np.array([10.0]))  # centred on a pixel corner
+    fd, _, cov = small(np.array([[10.0], [10.0]]))  # centred on a pixel corner
     assert (fd < 4096).sum() == 4  # a 2×2 square
     assert cov.sum() == pytest.approx(np.pi, abs=0.3)
 

@@ -25,6 +25,7 @@ import numpy as np
 
 from sc2data.agents import make_agent
 from sc2data.chunks import ChunkEncoder
+from sc2data.dataset import keep_freed_memory
 from sc2data.env import make_env
 from sc2data.rollout import RolloutConfig, episode_seeds, shard_attrs
 from sc2data.sim import env as sim_env
@@ -46,6 +47,7 @@ def timed(name: str, fn: Callable[..., Any]) -> Callable[..., Any]:
 
 def one_repeat(episodes: int, folder: Path, r: int) -> dict[str, float]:
     TOTALS.clear()
+    keep_freed_memory()  # as rollout.write_shard does
     config = RolloutConfig(episodes=episodes)
     writer = ShardWriter(folder / f"bench-{r}.h5", config.schema, config.codec,
                          shard_attrs(config, 0))

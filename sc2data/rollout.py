@@ -26,7 +26,8 @@ import numpy as np
 from sc2data import env as envs
 from sc2data.chunks import Codec
 from sc2data.dataset import (DATASET_FORMAT, DATASET_FORMAT_VERSION, MANIFEST, PARTIAL,
-                             read_manifest, shard_name, write_index, write_manifest)
+                             keep_freed_memory, read_manifest, shard_name, write_index,
+                             write_manifest)
 from sc2data.errors import Sc2DataError
 from sc2data.progress import bar as progress_bar
 from sc2data.provenance import versions
@@ -195,6 +196,7 @@ def write_shard(config: RolloutConfig, out: Path, env_factory: EnvFactory,
     Returns the shard's index rows (hashed here, so that K workers hash in parallel)."""
     final = out / shard_name(i)
     partial = final.with_name(final.name + PARTIAL)
+    keep_freed_memory()  # each step allocates ~620 KB of observation arrays: keep them warm
     writer = ShardWriter(partial, config.schema, config.codec, shard_attrs(config, i))
     try:
         for episode in config.shard_episodes(i):

@@ -44,8 +44,8 @@ class Codec:
     chunk_frames: int = 4
     """Frames per chunk. Consecutive frames are near identical, so longer chunks compress far
     better (paper layers in blocks, level 3: 2.1 KB/frame at 2, 1.5 KB at 4, 1.1 KB at 8), but a
-    random stack decodes whole chunks of every block it reads: 4 is the shortest chunk that
-    keeps well under the 2 KB/frame budget, and reads random stacks ≈ 1.2–1.4× faster than 8."""
+    random stack decodes whole chunks of every block it reads: 4 frames keeps well under the
+    2 KB/frame budget and reads random stacks ≈ 1.5× faster than 8 (BENCHMARKS.md)."""
 
     def dataset_kwargs(self) -> dict[str, Any]:
         """h5py ``create_dataset`` filter arguments: Zstd then fletcher32, as HDF5 applies them."""

@@ -378,6 +378,36 @@ def test_cache_does_not_change_results(dataset: Path) -> None:
             np.testing.assert_array_equal(a.arrays[k], b.arrays[k])
 
 
+def test_a_sequential_read_takes_the_shared_chunk_from_the_cache(
+        dataset: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Consecutive batches share a chunk at their boundary: with the cache it is decoded once,
+    and the cached (read-only) chunk gives the same stacks."""
+    from sc2data.chunks import ChunkDecoder
+
+    decoded: list[int] = []
+    real = ChunkDecoder.decode_into
+
+    def counting(self: ChunkDecoder, raws: list, *a: object) -> None:
+        decoded.append(len(raws))
+        real(self, raws, *a)
+
+    monkeypatch.setattr(ChunkDecoder, "decode_into", counting)
+    c = Codec().chunk_frames
+    counts = {}
+    for cache in (128 << 20, 0):
+        decoded.clear()
+        ds = sc2data.open_dataset(dataset, cache_bytes=cache)
+        first = ds.read([0] * c, np.arange(c))  # frames 0..c: chunks 0 and 1 of each block
+        second = ds.read([0] * c, np.arange(c, 2 * c))  # frames c..2c: chunks 1 and 2
+        counts[cache] = list(decoded)
+        np.testing.assert_array_equal(second.arrays["screen/unit_type"][0, 0],
+                                      first.arrays["screen/unit_type"][-1, 1])
+        ds.close()
+    blocks = len(SCHEMA.blocks())
+    assert counts[0] == [2 * blocks, 2 * blocks]
+    assert counts[128 << 20] == [2 * blocks, blocks]
+
+
 def test_bad_requests(dataset: Path) -> None:
     ds = sc2data.open_dataset(dataset)
     with pytest.raises(KeyError, match="episode 9"):

@@ -100,12 +100,46 @@ def read_figures(folder: Path) -> dict[str, float]:
     return r
 
 
+def read_existing(folder: Path, repeats: int) -> None:
+    """Read-back figures of an existing dataset (e.g. the paper recipe's), as ``open_dataset``
+    gives them by default: random batches of 256 once every shard has been opened (one untimed
+    pass over the shards first: opening costs ≈ 10 ms each), sequential over 102,400 stacks."""
+    ds = sc2data.open_dataset(folder)
+    rng = np.random.default_rng(0)
+    n = len(ds)
+    for e in ds.episode_ids[::max(1, len(ds.episode_ids) // len(ds.shard_names))]:
+        ds.stack(int(e), 0)
+    r: dict[str, list[float]] = {"random": [], "sequential": []}
+    for i in range(repeats):
+        pos = rng.integers(0, n, (8, 256))
+        t = time.perf_counter()
+        for p in pos:
+            ds.read(*ds.locate_positions(p))
+        r["random"].append(pos.size / (time.perf_counter() - t))
+        start = i * 102_400 % max(1, n - 102_400)
+        t = time.perf_counter()
+        for b in range(start, start + 102_400, 1024):
+            ds.read(*ds.locate(b, min(b + 1024, n)))
+        r["sequential"].append(102_400 / (time.perf_counter() - t))
+    ds.close()
+    print(f"# {folder}: {len(ds.shard_names)} shards, {n:,} stacks; medians of {repeats}\n")
+    print("| read-back | stacks/s |\n|---|---:|")
+    print(f"| random, read() of 256, all 23 keys | {statistics.median(r['random']):,.0f} |")
+    print(f"| sequential, read() of 1024 in order, all 23 keys | "
+          f"{statistics.median(r['sequential']):,.0f} |")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=8)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--agent", default="reduced-random")
+    parser.add_argument("--read", type=Path, metavar="DIR",
+                        help="only measure reading an existing dataset folder")
     args = parser.parse_args()
+    if args.read:
+        read_existing(args.read, args.repeats)
+        return
     config = RolloutConfig(env="sim", agent=args.agent, episodes=args.episodes, seed=1,
                            episodes_per_shard=1)
     print(f"# {platform.node()}: {os.cpu_count()} cores (shared), Python "

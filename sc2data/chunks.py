@@ -3,10 +3,11 @@
 Frame datasets declare HDF5's standard filter pipeline (hdf5plugin's Zstd filter, then HDF5's
 fletcher32), so any HDF5 reader with hdf5plugin decodes them and checks every checksum
 (``sc2data verify`` reads them that way). The hot paths skip HDF5's per-call filter machinery,
-which costs ~50 µs per chunk here (BENCHMARKS.md): the writer compresses a whole flush of chunks
-and writes them with ``write_direct_chunk``; the reader fetches raw chunks with
-``read_direct_chunk``, verifies the fletcher32 checksums of a whole batch in a few vectorised numpy
-calls, and decompresses. The bytes on disk are exactly what HDF5's own pipeline would write.
+which costs ~50 µs per chunk here (BENCHMARKS.md): the writer compresses each flush of chunks,
+checksums many flushes' chunks at once and writes them with ``write_direct_chunk``; the reader
+fetches raw chunks at the offsets of the shard's chunk index, verifies the fletcher32 checksums of
+a whole batch in a few vectorised numpy calls, and decompresses. The bytes on disk are exactly
+what HDF5's own pipeline would write.
 """
 
 from __future__ import annotations

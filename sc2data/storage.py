@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import mmap
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -307,12 +306,15 @@ def _damaged(path: Path, what: object) -> Sc2DataError:
 class FrameSource:
     """Decoded whole chunks of one frame dataset, as bytes.
 
-    Fast path (our Zstd + fletcher32 pipeline): the chunk table comes from one ``chunk_iter``
-    walk, chunks are sliced out of a memory map of the file, their checksums verified in one
-    vectorised pass, then decompressed. Any other pipeline is read through h5py, chunk by chunk.
+    Fast path (our Zstd + fletcher32 pipeline): the chunk table comes from the shard's stored
+    chunk index (or one ``chunk_iter`` walk), chunks are read from the file with ``os.pread``,
+    their checksums verified in one vectorised pass, then decompressed. (``pread`` rather than a
+    memory map: a map faults in each page on first touch, which halved random reads of a large
+    dataset already in the page cache, BENCHMARKS.md.) Any other pipeline is read through h5py,
+    chunk by chunk.
     """
 
-    def __init__(self, ds: h5py.Dataset, mm: mmap.mmap | None, where: str,
+    def __init__(self, ds: h5py.Dataset, fd: int | None, where: str,
                  table: np.ndarray | None = None) -> None:
         self.ds = ds
         self.where = where
@@ -321,7 +323,7 @@ class FrameSource:
         self.frame_shape: tuple[int, ...] = tuple(ds.shape[1:])
         self.dtype = ds.dtype
         self.chunk_bytes = self.chunk_frames * int(np.prod(self.frame_shape)) * ds.dtype.itemsize
-        self._mm = mm if mm is not None and fast_path_ok(ds) else None
+        self._fd = fd if fd is not None and fast_path_ok(ds) else None
         self._decoder = ChunkDecoder()
         self._stored = table
         self._table: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
@@ -341,21 +343,21 @@ class FrameSource:
 
     @property
     def fast(self) -> bool:
-        """True when chunks come raw off the memory map (then use :meth:`raw_chunks`)."""
-        return self._mm is not None
+        """True when chunks come raw from the file (then use :meth:`raw_chunks`)."""
+        return self._fd is not None
 
     def raw_chunks(self, ids: np.ndarray) -> tuple[list[bytes], list[int]]:
         """Fast path: the stored bytes (payload + checksum) and filter masks of chunks ``ids``,
         for a :class:`~sc2data.chunks.ChunkDecoder` to verify and decode."""
-        assert self._mm is not None
+        assert self._fd is not None
         offset, size, mask = self._chunk_table()
-        mm = self._mm
-        raws = [mm[o:o + n] for o, n in zip(offset[ids].tolist(), size[ids].tolist())]
+        fd = self._fd
+        raws = [os.pread(fd, n, o) for o, n in zip(offset[ids].tolist(), size[ids].tolist())]
         return raws, mask[ids].tolist()
 
     def read_chunks(self, ids: np.ndarray) -> list[bytes]:
         """The decoded bytes of chunks ``ids`` (``chunk_bytes`` each, the last zero padded)."""
-        if self._mm is not None:
+        if self._fd is not None:
             raws, masks = self.raw_chunks(ids)
             return self._decoder.decode(raws, masks, [self.chunk_bytes] * len(raws),
                                         [self.where] * len(raws))
@@ -398,7 +400,7 @@ class Shard:
             self.file.close()
             raise
         self._sources: dict[str, FrameSource] = {}
-        self._mm: mmap.mmap | None = None
+        self._fd: int | None = None
         self._index: dict[str, np.ndarray] | None = None
 
     def chunk_index(self) -> dict[str, np.ndarray]:
@@ -419,14 +421,13 @@ class Shard:
     def frames(self, block: str) -> FrameSource:
         """The chunk reader of frame dataset ``block`` (a :class:`~sc2data.schema.Block` name)."""
         if block not in self._sources:
-            if self._mm is None:
-                with open(self.path, "rb") as f:
-                    self._mm = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
+            if self._fd is None:
+                self._fd = os.open(self.path, os.O_RDONLY)
             try:
                 ds = self.file[f"frames/{block}"]
             except KeyError:
                 raise _damaged(self.path, f"frames/{block} is missing") from None
-            self._sources[block] = FrameSource(ds, self._mm, f"{self.path.name}:frames/{block}",
+            self._sources[block] = FrameSource(ds, self._fd, f"{self.path.name}:frames/{block}",
                                                self.chunk_index().get(block))
         return self._sources[block]
 
@@ -439,9 +440,9 @@ class Shard:
 
     def close(self) -> None:
         self._sources.clear()
-        if self._mm is not None:
-            self._mm.close()
-            self._mm = None
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
         self.file.close()
 
 

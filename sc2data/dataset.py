@@ -27,7 +27,7 @@ import pyarrow.parquet as pq
 from sc2data.chunks import ChunkDecoder
 from sc2data.errors import Sc2DataError
 from sc2data.schema import Block, Schema, SchemaError, StackBatch
-from sc2data.storage import FrameSource, Shard, fsync_path
+from sc2data.storage import Shard, fsync_path
 
 DATASET_FORMAT = "sc2data-dataset"
 DATASET_FORMAT_VERSION = 2

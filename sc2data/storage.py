@@ -128,7 +128,7 @@ class ShardWriter:
             self._file.attrs[k] = v if type(v) is int else json.dumps(v)
         c = codec.chunk_frames
         self._blocks = schema.blocks()
-        self._frames = {}
+        self._frames: dict[str, h5py.Dataset] = {}
         for b in self._blocks:
             ds = self._file.create_dataset(
                 f"frames/{b.name}", shape=(0, *b.frame_shape), maxshape=(None, *b.frame_shape),
@@ -459,17 +459,6 @@ def _first_line(e: BaseException) -> str:
     return str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
 
 
-__all__ = [
-    "ARG_WIDTH",
-    "CHUNK_INDEX",
-    "ChecksumError",
-    "FrameSource",
-    "ObservationError",
-    "Shard",
-    "ShardWriter",
-    "chunk_table",
-    "flatten_args",
-    "fsync_path",
-    "function_call",
-    "sha256_file",
-]
+__all__ = ["ARG_WIDTH", "CHUNK_INDEX", "ChecksumError", "FrameSource", "ObservationError",
+           "Shard", "ShardWriter", "chunk_table", "flatten_args", "function_call", "fsync_path",
+           "sha256_file"]

@@ -24,7 +24,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from sc2data.chunks import ChunkDecoder
+from sc2data.chunks import ChunkDecoder, Codec
 from sc2data.errors import Sc2DataError
 from sc2data.schema import Block, Schema, SchemaError, StackBatch
 from sc2data.storage import Shard, fsync_path
@@ -117,6 +117,17 @@ def manifest_schema(manifest: dict[str, Any], where: Path) -> Schema:
         raise Sc2DataError(f"{where}: {e}") from None
 
 
+def manifest_codec(manifest: dict[str, Any], where: Path) -> Codec:
+    try:
+        codec = Codec.from_dict(manifest["settings"]["codec"])
+    except (KeyError, TypeError, ValueError) as e:
+        raise Sc2DataError(f"{where}: no valid codec in its settings ({e!r}); regenerate the "
+                           f"dataset with this sc2data") from None
+    if codec.chunk_frames < 1:
+        raise Sc2DataError(f"{where}: chunk_frames {codec.chunk_frames} must be at least 1")
+    return codec
+
+
 _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
 _malloc_tuned = False
 
@@ -207,7 +218,7 @@ class Dataset:
         self._cache = _ChunkCache(cache_bytes)
         self._decoder = ChunkDecoder()
         self._blocks = self.schema.blocks()
-        self._chunk_frames = int(self.manifest["settings"]["codec"]["chunk_frames"])
+        self._chunk_frames = manifest_codec(self.manifest, self.folder / MANIFEST).chunk_frames
         self._frame_layout: dict[str, tuple[tuple[int, ...], np.dtype]] = {
             l.key: ((self.schema.size(l.group),) * 2, l.dtype) for l in self.schema.layers}
         self._frame_layout.update({v.name: ((v.size,), v.dtype) for v in self.schema.vectors})

@@ -47,7 +47,7 @@ def _run(env: Any, agent: Any, steps: int) -> float:
 
 
 def _agent(workload: str, seed: int) -> Any:
-    from sc2data.agents import make_agent  # imports pysc2 through sc2data._pysc2 first
+    from sc2data.game.agents import make_agent  # imports pysc2 through sc2data._pysc2 first
     from pysc2.agents import base_agent  # isort: skip
 
     return base_agent.BaseAgent() if workload == WORKLOADS[0] else make_agent(workload, seed=seed)
@@ -57,7 +57,7 @@ def _measure(workload: str, backend: str, steps: int, repeats: int, core: int,
              result: Any) -> None:
     """Child process: time the repeats, then an untimed tracemalloc pass; report by the queue."""
     os.sched_setaffinity(0, {core})
-    from sc2data.env import make_env
+    from sc2data.game.env import make_env
 
     env = make_env(backend, seed=0)
     _run(env, _agent(workload, 0), 50)  # warm up: imports, caches, first reset

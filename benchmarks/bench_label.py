@@ -2,7 +2,7 @@
 
 * rules only — every built-in rule (with the labeller's shape/dtype checks) over in-memory
   batches of real stacks: one simulator episode per agent, tiled to ``--stacks``;
-* end to end — ``sc2data.label.label_dataset`` on a dataset rolled out with ``sc2data rollout``
+* end to end — ``sc2data.labels.label.label_dataset`` on a dataset rolled out with ``sc2data rollout``
   (``--data DIR``), reading only the keys the rules require, writing the Parquet files.
 
 Prints the median of ``--repeats`` runs, as stacks per second of wall-clock time and per second of
@@ -24,15 +24,15 @@ from pathlib import Path
 
 import numpy as np
 
-from sc2data.label import label_batches
-from sc2data.registry import load_registry
+from sc2data.labels.label import label_batches
+from sc2data.labels.registry import load_registry
 from sc2data.schema import Schema, StackBatch
 
 
 def episode_stacks(agent_name: str, seed: int, keys: set[str]) -> dict[str, np.ndarray]:
     """All stacks of one simulator episode, only ``keys``, as ``(N, 2, …)`` arrays."""
-    from sc2data.agents import make_agent
-    from sc2data.env import make_env
+    from sc2data.game.agents import make_agent
+    from sc2data.game.env import make_env
 
     schema = Schema.paper()
     env = make_env("sim", seed=seed)
@@ -98,7 +98,7 @@ def rate(stacks: int, walls: list[float], cpus: list[float]) -> str:
 
 
 def end_to_end(data: Path, batch_size: int, repeats: int) -> None:
-    from sc2data.label import LABELS_FILE, STACKS_FILE, label_dataset
+    from sc2data.labels.label import LABELS_FILE, STACKS_FILE, label_dataset
 
     walls, cpus = [], []
     for _ in range(repeats):

@@ -2,7 +2,7 @@
 
 1. ``build_pairs`` on labels shaped like the paper recipe's data (2,400 reduced-random episodes of
    1,800 steps, each command firing at the rate measured on the simulator), timed end to end.
-2. Packing: ``sc2data.pairset._pack_split`` copying a pair set's stacks from a real rolled-out,
+2. Packing: ``sc2data.pairs.pairset._pack_split`` copying a pair set's stacks from a real rolled-out,
    labelled dataset (``--data``, e.g. the demo's ``demo-out/data/rollout``) into a packed file.
 
     python benchmarks/bench_pairs.py --data demo-out/data/rollout --repeats 3
@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
-from sc2data.pairs import Labelled, build_pairs
+from sc2data.pairs.draw import Labelled, build_pairs
 from sc2data.recipe import load
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -46,8 +46,8 @@ def bench_build_pairs(repeats: int) -> None:
 
 
 def bench_pack(data: Path, repeats: int, n: int) -> None:
-    from sc2data.dataset import open_dataset
-    from sc2data.pairset import _pack_split
+    from sc2data.data.dataset import open_dataset
+    from sc2data.pairs.pairset import _pack_split
 
     ds = open_dataset(data)
     rng = np.random.default_rng(1)

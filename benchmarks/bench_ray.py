@@ -32,8 +32,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from sc2data.rollout import RolloutConfig, rollout
-from sc2data.scaleout import RayOptions, rollout_on_ray
+from sc2data.data.rollout import RolloutConfig, rollout
+from sc2data.scaleout.driver import RayOptions, rollout_on_ray
 
 VARIANTS = ("local 1", "local 2", "ray 1", "ray 2")
 

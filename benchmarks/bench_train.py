@@ -34,8 +34,8 @@ def loader_alone(data: Path, pool: int, categorical: str, passes: int, gpu: bool
     training, which packs on the device), with no training."""
     import torch
 
-    from sc2data import model as M
-    from sc2data.loader import PairLoader, PairSet
+    from sc2data.model import mem as M
+    from sc2data.pairs.loader import PairLoader, PairSet
 
     ps = PairSet(data)
     p = ps.pairs("train")
@@ -61,8 +61,8 @@ def training(data: Path, device: str, threads: int | None, amp: bool, pool: int,
              categorical: str, epochs: int) -> tuple[float, float, float]:
     """(train pairs/s, train pairs per CPU-second, validation pairs/s) of ``sc2data train``,
     epochs after the first."""
-    from sc2data.loader import PairSet
-    from sc2data.train import TrainConfig, train
+    from sc2data.pairs.loader import PairSet
+    from sc2data.model.train import TrainConfig, train
 
     with tempfile.TemporaryDirectory() as out:
         run = train(TrainConfig(data=str(data), out=out, epochs=epochs, device=device,
@@ -92,7 +92,7 @@ def main() -> None:
     tmp = None
     data = args.data
     if data is None:
-        from sc2data.synthetic_pairs import write_pairset
+        from sc2data.testing.synthetic_pairs import write_pairset
 
         tmp = tempfile.TemporaryDirectory()
         t0 = time.perf_counter()

@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from sc2data.agents import make_agent
-from sc2data.env import make_env
+from sc2data.game.agents import make_agent
+from sc2data.game.env import make_env
 
 EPISODES: tuple[tuple[str, int, int], ...] = (
     ("reduced-random", 11, 101), ("reduced-random", 12, 102), ("reduced-random", 13, 103),

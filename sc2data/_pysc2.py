@@ -19,6 +19,8 @@ import sys
 from collections.abc import Callable, MutableSequence
 from typing import Any
 
+from sc2data.vocab import MINIMAP_SIZE, SCREEN_SIZE
+
 os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 if "google.protobuf" not in sys.modules:
     os.environ.setdefault("PROTOCOL_BUFFERS_PYTHON_IMPLEMENTATION", "python")
@@ -43,4 +45,12 @@ try:
 finally:
     random.shuffle = _shuffle
 
-__all__ = ["actions", "colors", "environment", "features", "point", "sc2_env", "units"]
+__all__ = ["actions", "colors", "environment", "features", "interface_format", "point", "sc2_env",
+           "units"]
+
+
+def interface_format() -> sc2_env.AgentInterfaceFormat:
+    """The agent interface the whole project uses: 64×64 feature screen and minimap (the simulator
+    and the real game alike)."""
+    return sc2_env.AgentInterfaceFormat(
+        feature_dimensions=sc2_env.Dimensions(screen=SCREEN_SIZE, minimap=MINIMAP_SIZE))

@@ -44,12 +44,12 @@ def build(recipe: Recipe, out: str | os.PathLike[str], *, workers: int = 1,
           progress: bool | None = None, ray: Any = None) -> BuildReport:
     """Run every stage of ``recipe`` into ``out``; stages already complete are kept.
 
-    ``ray`` (:class:`sc2data.scaleout.RayOptions`): roll out and label as Ray tasks, on one Ray
+    ``ray`` (:class:`sc2data.scaleout.driver.RayOptions`): roll out and label as Ray tasks, on one Ray
     instance or cluster for both stages; the data is the same either way.
     """
-    from sc2data.label import label_dataset
-    from sc2data.pairset import make_pairset
-    from sc2data.rollout import RolloutConfig, check_folder, rollout
+    from sc2data.labels.label import label_dataset
+    from sc2data.pairs.pairset import make_pairset
+    from sc2data.data.rollout import RolloutConfig, check_folder, rollout
 
     out = Path(out)
     report = BuildReport(out)
@@ -57,7 +57,7 @@ def build(recipe: Recipe, out: str | os.PathLike[str], *, workers: int = 1,
     config = RolloutConfig.from_recipe(recipe)
     with contextlib.ExitStack() as stack:
         if ray is not None:
-            from sc2data.scaleout import connect, label_on_ray, rollout_on_ray
+            from sc2data.scaleout.driver import connect, label_on_ray, rollout_on_ray
 
             config.validate()
             check_folder(config, data)  # before Ray starts for nothing

@@ -41,7 +41,7 @@ app.add_typer(rules_app, name="rules")
 _RULES_DIR_HELP = "Also load the rules defined by the .py files of this folder."
 
 
-# -- Ray options, shared by rollout and label (sc2data.scaleout) --------------------------------
+# -- Ray options, shared by rollout and label (sc2data.scaleout.driver) --------------------------------
 def _ray_option() -> Any:
     return typer.Option(None, "--ray", metavar="[ADDRESS]",
                         help="Run as Ray tasks: --ray alone starts a local Ray instance; auto, "
@@ -66,7 +66,7 @@ def _ray_memory() -> Any:
 
 def _ray_options(address: str, retries: int, timeout: float, memory: Optional[int],
                  workers: Optional[int] = None) -> Any:
-    from sc2data.scaleout import RayOptions, require_ray
+    from sc2data.scaleout.driver import RayOptions, require_ray
 
     require_ray()
     options = RayOptions.parse(address, retries=retries, timeout_s=timeout, memory_mb=memory,
@@ -77,7 +77,7 @@ def _ray_options(address: str, retries: int, timeout: float, memory: Optional[in
 
 def _bare_ray(argv: list[str]) -> list[str]:
     """``--ray`` with no address means ``--ray local``: typer has no optional option values."""
-    from sc2data.scaleout import is_address
+    from sc2data.scaleout.driver import is_address
 
     out: list[str] = []
     for j, arg in enumerate(argv):
@@ -92,7 +92,7 @@ def rules_list(
     rules_dir: Optional[Path] = typer.Option(None, "--rules-dir", help=_RULES_DIR_HELP),
 ) -> None:
     """List every rule found, validated: id, version, command text and where it comes from."""
-    from sc2data.registry import format_rules, load_registry
+    from sc2data.labels.registry import format_rules, load_registry
 
     typer.echo(format_rules(load_registry(rules_dir)))
 
@@ -116,14 +116,14 @@ def label(
     ray_memory: Optional[int] = _ray_memory(),
 ) -> None:
     """Label every stack of DATA with the rules; writes labels.parquet and stack_labels.parquet."""
-    from sc2data.label import label_dataset
-    from sc2data.registry import parse_ids
+    from sc2data.labels.label import label_dataset
+    from sc2data.labels.registry import parse_ids
 
     selection = {"include": parse_ids(rules), "exclude": parse_ids(exclude) or [],
                  "rules_dir": rules_dir, "batch_size": batch_size, "progress": progress}
     lines: list[str] = []
     if ray is not None:
-        from sc2data.scaleout import label_on_ray
+        from sc2data.scaleout.driver import label_on_ray
 
         options = _ray_options(ray, ray_retries, ray_timeout, ray_memory)
         summary, report = label_on_ray(data, options, **selection)
@@ -146,7 +146,7 @@ def render(
     agent: str = typer.Option("scripted", "--agent", help="Agent: random, reduced-random, scripted."),
 ) -> None:
     """Play N steps and draw that frame's 27 screen and 11 minimap layers, coloured as pysc2 does."""
-    from sc2data.render import render_episode
+    from sc2data.game.render import render_episode
 
     path = render_episode(out, env=env, seed=seed, steps=steps, agent=agent)
     typer.echo(f"wrote {path}")
@@ -180,8 +180,8 @@ def rollout(
 ) -> None:
     """Play episodes and store every 2-frame stack in sharded, checksummed HDF5."""
     from sc2data.errors import Sc2DataError
-    from sc2data.rollout import RolloutConfig
-    from sc2data.rollout import rollout as run
+    from sc2data.data.rollout import RolloutConfig
+    from sc2data.data.rollout import rollout as run
 
     given = {k: v for k, v in {"env": env, "agent": agent, "episodes": episodes, "seed": seed,
                                "layers": layers}.items() if v is not None}
@@ -197,7 +197,7 @@ def rollout(
         config = RolloutConfig(**given, **extra)
     lines: list[str] = []
     if ray is not None:
-        from sc2data.scaleout import rollout_on_ray
+        from sc2data.scaleout.driver import rollout_on_ray
 
         options = _ray_options(ray, ray_retries, ray_timeout, ray_memory, workers)
         s, report = rollout_on_ray(config, out, options, progress=progress)
@@ -221,7 +221,7 @@ def pair(
                                             help="Progress bar (default: on a terminal)."),
 ) -> None:
     """Draw the recipe's matched, mismatched and null pairs; pack the stacks of each split."""
-    from sc2data.pairset import make_pairset
+    from sc2data.pairs.pairset import make_pairset
     from sc2data.recipe import load
 
     r = load(recipe)
@@ -263,7 +263,7 @@ def build(
 @app.command()
 def info(folder: Path = typer.Argument(..., help="Dataset folder.")) -> None:
     """Episodes, frames, bytes, the schema and per-shard figures of a dataset."""
-    from sc2data.audit import info as report
+    from sc2data.data.audit import info as report
 
     for line in report(folder):
         typer.echo(line)
@@ -272,7 +272,7 @@ def info(folder: Path = typer.Argument(..., help="Dataset folder.")) -> None:
 @app.command()
 def verify(folder: Path = typer.Argument(..., help="Dataset folder.")) -> None:
     """Check every checksum, sha256, schema and the index; exit 1 on any fault."""
-    from sc2data.audit import verify as check
+    from sc2data.data.audit import verify as check
 
     faults = check(folder)
     for fault in faults:
@@ -305,7 +305,7 @@ def train_cmd(
     progress: bool = typer.Option(True, help="Show the progress bar."),
 ) -> None:
     """Train the mutual-embedding model; keep the checkpoint of minimum validation loss."""
-    from sc2data.train import TrainConfig, train
+    from sc2data.model.train import TrainConfig, train
 
     run = train(TrainConfig(
         data=str(data), out=str(out) if out else None, epochs=epochs, batch_size=batch_size,
@@ -322,7 +322,7 @@ def evaluate_cmd(
     device: str = typer.Option("auto", help="auto, cpu or cuda."),
 ) -> None:
     """Accuracy (beside the paper's), ROC-AUC, retrieval, paraphrases; writes RUN/eval.json."""
-    from sc2data.evaluate import evaluate, format_report
+    from sc2data.model.evaluate import evaluate, format_report
 
     report = evaluate(run, data, device)
     typer.echo(format_report(report))
@@ -340,7 +340,7 @@ def tsne_cmd(
     device: str = typer.Option("auto", help="auto, cpu or cuda."),
 ) -> None:
     """A t-SNE map of state and command embeddings, like the paper's Fig. 3."""
-    from sc2data.evaluate import tsne
+    from sc2data.model.evaluate import tsne
 
     typer.echo(f"wrote {tsne(run, data, out, states, seed, text, device)}")
 

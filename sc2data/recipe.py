@@ -38,12 +38,9 @@ from pathlib import Path
 from typing import Any
 
 from sc2data.errors import Sc2DataError
+from sc2data.vocab import (BACKENDS, LAYER_SETS, MISMATCH_METHODS, SPLIT_METHODS, SPLITS,
+                            STEP_MUL)
 
-SPLITS: tuple[str, ...] = ("train", "val", "test")
-SPLIT_METHODS: tuple[str, ...] = ("episode", "random")
-MISMATCH_METHODS: tuple[str, ...] = ("uniform",)
-ENVS: tuple[str, ...] = ("sim", "sc2")
-LAYER_SETS: tuple[str, ...] = ("paper", "full")
 
 
 class RecipeError(Sc2DataError):
@@ -52,13 +49,22 @@ class RecipeError(Sc2DataError):
 
 @dataclass(frozen=True)
 class RolloutSpec:
-    """Rollout settings: which backend and agent play how many episodes."""
+    """A recipe's ``[rollout]`` section: which backend and agent play how many episodes.
+
+    :class:`sc2data.data.rollout.RolloutConfig` extends it with what only a run decides (seed,
+    shard size, codec), so the defaults below are the only ones.
+    """
 
     env: str = "sim"
+    """Backend: ``sim`` (embedded simulator) or ``sc2`` (the real game through pysc2)."""
     agent: str = "reduced-random"
-    episodes: int = 10
+    """Agent name for ``sc2data.game.agents.make_agent``."""
+    episodes: int = 1
+    """Episodes to play."""
     layers: str = "paper"
-    step_mul: int = 8
+    """Layer set: ``paper`` (13 screen + 7 minimap) or ``full`` (27 + 11)."""
+    step_mul: int = STEP_MUL
+    """Game loops per agent step."""
 
 
 @dataclass(frozen=True)
@@ -153,7 +159,7 @@ def parse(data: Mapping[str, Any], source: str = "<recipe>") -> Recipe:
     _check_keys(f"{w} [rollout]", r, {"env": str, "agent": str, "episodes": int, "layers": str,
                                       "step_mul": int})
     rollout = RolloutSpec(**r)
-    _choice(f"{w} [rollout].env", rollout.env, ENVS)
+    _choice(f"{w} [rollout].env", rollout.env, BACKENDS)
     _choice(f"{w} [rollout].layers", rollout.layers, LAYER_SETS)
     _positive(f"{w} [rollout].episodes", rollout.episodes)
     _positive(f"{w} [rollout].step_mul", rollout.step_mul)

@@ -20,12 +20,11 @@ from typing import Any, Literal
 import numpy as np
 
 from sc2data._pysc2 import features
+from sc2data.vocab import MINIMAP_SIZE, SCREEN_SIZE
 
 SCHEMA_VERSION = 1
 """Bump when the stored layout changes; readers refuse shards of another version."""
 
-SCREEN_SIZE = 64
-MINIMAP_SIZE = 64
 
 Group = Literal["screen", "minimap"]
 

@@ -22,7 +22,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from sc2data.dataset import PARTIAL
+from sc2data.data.dataset import PARTIAL
 from sc2data.errors import Sc2DataError
 
 Report = Callable[[int], None]

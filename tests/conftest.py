@@ -7,7 +7,7 @@ import pytest
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Skip ``@pytest.mark.sc2`` tests where the StarCraft II binary is absent."""
-    from sc2data.env import sc2_available
+    from sc2data.game.env import sc2_available
 
     if sc2_available():
         return

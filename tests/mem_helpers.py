@@ -13,7 +13,7 @@ SMALL_SCHEMA = Schema.from_names(["unit_type", "player_relative", "unit_hit_poin
 
 
 def tiny_pairset(path: Path, schema: Schema | None = None, **kw: object) -> Path:
-    from sc2data.synthetic_pairs import write_pairset
+    from sc2data.testing.synthetic_pairs import write_pairset
 
     args = dict(states_per_command=24, null_states=40, episodes=12, seed=0)
     args.update(kw)
@@ -21,7 +21,7 @@ def tiny_pairset(path: Path, schema: Schema | None = None, **kw: object) -> Path
 
 
 def train_tiny(data: Path, out: Path, epochs: int = 2, **kw: object) -> Path:
-    from sc2data.train import TrainConfig, train
+    from sc2data.model.train import TrainConfig, train
 
     args: dict[str, object] = dict(threads=1, progress=False, vocab_size=2000)
     args.update(kw)

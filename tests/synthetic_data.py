@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sc2data.chunks import Codec
-from sc2data.rollout import RolloutConfig, RolloutSummary, rollout
-from sc2data.synthetic import pysc2_random_agent, synthetic_env_factory
+from sc2data.data.chunks import Codec
+from sc2data.data.rollout import RolloutConfig, RolloutSummary, rollout
+from sc2data.testing.synthetic import pysc2_random_agent, synthetic_env_factory
 
 STEPS = 30
 """Steps per synthetic episode: 31 frames, so chunks (4 frames by default) straddle episodes."""

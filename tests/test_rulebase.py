@@ -128,6 +128,6 @@ def test_readme_write_your_own_rule_examples_run() -> None:
     namespace: dict = {"__name__": "readme_example"}
     for block in blocks:
         exec(compile(block, "README.md", "exec"), namespace)  # noqa: S102
-    from sc2data.registry import validate
+    from sc2data.labels.registry import validate
 
     validate(namespace["FinishSupplyDepot"](), "README.md")

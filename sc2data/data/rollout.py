@@ -1,0 +1,366 @@
+"""``sc2data rollout``: agents play BuildMarines and their 2-frame stacks stream into shards.
+
+Shard ``i`` holds episodes ``[i·E, (i+1)·E)`` and episode ``e`` is seeded from ``(seed, e)``
+alone, so the data never depends on the number of workers. K worker processes each write whole
+shards as ``*.h5.partial`` and rename them when complete and fsynced (:mod:`sc2data.workers`);
+the parent shows one progress bar fed by the workers, and writes ``index.parquet`` last.
+Rerunning the same command after an interruption (Ctrl-C, ``kill -9``) deletes stale partials,
+keeps the complete shards and finishes the rest; other settings in the same folder are refused.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import os
+import random
+import shutil
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sc2data.game import env as envs
+from sc2data.data.chunks import Codec
+from sc2data.data.dataset import (DATASET_FORMAT, DATASET_FORMAT_VERSION, MANIFEST, PARTIAL,
+                             keep_freed_memory, read_manifest, shard_name, write_index,
+                             write_manifest)
+from sc2data.errors import Sc2DataError
+from sc2data.progress import bar as progress_bar
+from sc2data.provenance import versions
+from sc2data.recipe import Recipe, RolloutSpec
+from sc2data.schema import Schema
+from sc2data.vocab import BACKENDS, EPISODE_STEPS, LAYER_SETS, MAP_NAME
+from sc2data.data.shards import Shard, ShardWriter, fsync_path, sha256_file
+from sc2data.workers import LOCK, FolderLock, run_parallel
+
+EnvFactory = Callable[[int], Any]
+"""``seed -> environment.Base`` (a pysc2 environment) for one episode."""
+AgentFactory = Callable[[int], Any]
+"""``seed -> pysc2 BaseAgent`` for one episode."""
+ShardRunner = Callable[["RolloutConfig", Path, list[int], EnvFactory, AgentFactory, Any],
+                      dict[int, list[dict[str, Any]]]]
+"""Writes the shards ``todo`` elsewhere than in local worker processes (Ray tasks:
+``sc2data.scaleout.driver.RayShards``): ``runner(config, out, todo, env_factory, agent_factory, bar)``,
+each shard through :func:`write_shard`, feeding the progress ``bar``; returns what
+:func:`write_shard` returned, by shard."""
+_SETTINGS_ORDER = ("env", "agent", "episodes", "seed", "layers", "episodes_per_shard", "max_steps",
+                   "step_mul", "recipe", "codec")
+"""Key order of the settings JSON in ``dataset.json`` and every shard (kept so bytes stay equal)."""
+
+
+@dataclass(frozen=True)
+class RolloutConfig(RolloutSpec):
+    """Everything that decides a rollout's data (the number of workers does not): the recipe's
+    rollout section plus the run's own settings."""
+
+    seed: int = 0
+    """Root seed; episode ``e`` is seeded from ``SeedSequence(seed, spawn_key=(e,))``."""
+    episodes_per_shard: int = 8
+    """Episodes per shard file: bounds a shard to ~8 × 1,801 frames (≈15 MB at 1 KB/frame)."""
+    max_steps: int | None = None
+    """Cut episodes after this many steps (None: play to the end, 1,800 steps on BuildMarines)."""
+    recipe: str | None = None
+    """The recipe (``manifests/*.toml``) these settings came from, if any."""
+    codec: Codec = field(default_factory=Codec)
+    """Chunking and compression of frame datasets."""
+
+    def validate(self) -> None:
+        """Raise :class:`Sc2DataError` on settings no rollout can run with."""
+        if self.env not in BACKENDS:
+            raise Sc2DataError(f"unknown environment {self.env!r}; choose one of: "
+                               f"{', '.join(BACKENDS)}")
+        if self.layers not in LAYER_SETS:
+            raise Sc2DataError(f"unknown layer set {self.layers!r}; choose one of: "
+                               f"{', '.join(LAYER_SETS)}")
+        for name in ("episodes", "episodes_per_shard"):
+            if getattr(self, name) < 1:
+                raise Sc2DataError(f"{name.replace('_', '-')} must be at least 1, "
+                                   f"not {getattr(self, name)}")
+        if self.step_mul < 1:
+            raise Sc2DataError(f"step-mul must be at least 1, not {self.step_mul}")
+        if self.max_steps is not None and self.max_steps < 1:
+            raise Sc2DataError(f"max-steps must be at least 1, not {self.max_steps}")
+        if not 0 <= self.seed < 2**63:
+            raise Sc2DataError(f"seed must be a non-negative integer, not {self.seed}")
+        if not (1 <= self.codec.chunk_frames <= 1024 and 1 <= self.codec.level <= 22):
+            raise Sc2DataError(f"bad codec settings {self.codec}")
+
+    @classmethod
+    def from_recipe(cls, recipe: Recipe, **overrides: Any) -> RolloutConfig:
+        """The rollout settings of a parsed recipe (:func:`sc2data.recipe.load`)."""
+        spec = {f.name: getattr(recipe.rollout, f.name) for f in fields(RolloutSpec)}
+        return cls(**{**spec, "seed": recipe.seed, "recipe": recipe.name, **overrides})
+
+    @property
+    def schema(self) -> Schema:
+        return Schema.named(self.layers)
+
+    @property
+    def n_shards(self) -> int:
+        return -(-self.episodes // self.episodes_per_shard)
+
+    def shard_episodes(self, i: int) -> range:
+        e = self.episodes_per_shard
+        return range(i * e, min((i + 1) * e, self.episodes))
+
+    def settings(self) -> dict[str, Any]:
+        """JSON form, recorded in ``dataset.json`` and in every shard."""
+        d = asdict(self)
+        d["codec"] = self.codec.to_dict()
+        return {k: d[k] for k in _SETTINGS_ORDER}
+
+
+def episode_seeds(seed: int, episode: int) -> tuple[int, int]:
+    """(environment seed, agent seed) of an episode, from the root seed and its index only."""
+    s = np.random.SeedSequence(seed, spawn_key=(episode,)).generate_state(2, np.uint32)
+    return int(s[0] >> 1), int(s[1] >> 1)  # 31-bit: what SC2's random_seed accepts
+
+
+def default_env_factory(config: RolloutConfig) -> EnvFactory:
+    return functools.partial(_make_env, config.env, config.step_mul)
+
+
+def _make_env(backend: str, step_mul: int, seed: int) -> Any:
+    return envs.make_env(backend, seed=seed, step_mul=step_mul)
+
+
+def _make_agent(name: str, seed: int) -> Any:
+    from sc2data.game.agents import make_agent
+
+    return make_agent(name, seed=seed)
+
+
+def default_agent_factory(config: RolloutConfig) -> AgentFactory:
+    return functools.partial(_make_agent, config.agent)
+
+
+# -- one shard ----------------------------------------------------------------------------------
+def play_episode(env: Any, agent: Any, writer: ShardWriter, max_steps: int | None,
+                 report: Callable[[int], None]) -> int:
+    """Play one episode into ``writer``: frame 0, then (action, frame t+1, reward) per step."""
+    timestep = env.reset()[0]
+    agent.reset()
+    writer.add_observation(timestep.observation)
+    steps = unreported = 0
+    while not timestep.last() and (max_steps is None or steps < max_steps):
+        call = agent.step(timestep)
+        timestep = env.step([call])[0]
+        writer.add_observation(timestep.observation)
+        writer.add_step(int(call.function), call.arguments, timestep.reward)
+        steps += 1
+        unreported += 1
+        if unreported == 200:
+            report(unreported)
+            unreported = 0
+    report(unreported)
+    return steps
+
+
+def shard_attrs(config: RolloutConfig, i: int) -> dict[str, Any]:
+    span = config.shard_episodes(i)
+    return {"settings": config.settings(), "versions": versions(), "backend": config.env,
+            "map": MAP_NAME, "agent": config.agent, "seed": config.seed,
+            "layers": config.layers, "recipe": config.recipe or "",
+            "episode_start": span.start, "episode_stop": span.stop}
+
+
+def index_rows(path: Path, name: str | None = None) -> list[dict[str, Any]]:
+    """Index rows of a complete shard (listed as ``name``, default its file name): its episode
+    table plus the file's sha256 and size."""
+    shard = Shard(path)
+    try:
+        table = shard.episodes
+    finally:
+        shard.close()
+    digest, size = sha256_file(path), path.stat().st_size
+    return [{"shard": name or path.name, **{c: (float(v[j]) if c == "reward" else int(v[j]))
+                                    for c, v in table.items()},
+             "shard_sha256": digest, "shard_bytes": size} for j in range(len(table["episode"]))]
+
+
+def write_shard(config: RolloutConfig, out: Path, env_factory: EnvFactory,
+                agent_factory: AgentFactory, i: int, report: Callable[[int], None]
+                ) -> list[dict[str, Any]]:
+    """Play shard ``i``'s episodes into ``shard-i.h5.partial``, then give it its final name.
+
+    Returns the shard's index rows (hashed here, so that K workers hash in parallel)."""
+    final = out / shard_name(i)
+    partial = final.with_name(final.name + PARTIAL)
+    keep_freed_memory()  # each step allocates ~620 KB of observation arrays: keep them warm
+    writer = ShardWriter(partial, config.schema, config.codec, shard_attrs(config, i))
+    try:
+        for episode in config.shard_episodes(i):
+            env_seed, agent_seed = episode_seeds(config.seed, episode)
+            # Agents that draw from the global generators (pysc2's RandomAgent) are seeded too.
+            random.seed(agent_seed)
+            np.random.seed(agent_seed)
+            env = env_factory(env_seed)
+            try:
+                agent = agent_factory(agent_seed)
+                agent.setup(env.observation_spec()[0], env.action_spec()[0])
+                writer.begin_episode(episode, env_seed, agent_seed)
+                play_episode(env, agent, writer, config.max_steps, report)
+                writer.end_episode()
+            finally:
+                env.close()
+        writer.close()
+    except BaseException:
+        writer.abort()
+        partial.unlink(missing_ok=True)
+        raise
+    rows = index_rows(partial, final.name)
+    os.replace(partial, final)
+    fsync_path(out)
+    return rows
+
+
+# -- the folder ---------------------------------------------------------------------------------
+def manifest_for(config: RolloutConfig) -> dict[str, Any]:
+    return {"format": DATASET_FORMAT, "format_version": DATASET_FORMAT_VERSION,
+            "settings": config.settings(), "schema": config.schema.to_dict(),
+            "versions": versions(), "map": MAP_NAME, "n_shards": config.n_shards}
+
+
+def _differences(a: dict[str, Any], b: dict[str, Any]) -> list[str]:
+    return sorted(k for k in set(a) | set(b) if a.get(k) != b.get(k))
+
+
+def check_folder(config: RolloutConfig, out: Path) -> None:
+    """Refuse a file, a foreign folder, or a dataset made with other settings."""
+    if out.exists() and not out.is_dir():
+        raise Sc2DataError(f"output {out} exists and is not a folder; choose another --out")
+    if out.is_dir() and (out / MANIFEST).exists():
+        old = read_manifest(out)
+        diff = _differences(old.get("settings", {}), config.settings())
+        if diff:
+            raise Sc2DataError(f"{out} holds a dataset made with other settings (differs in: "
+                               f"{', '.join(diff)}); use another --out or delete it")
+    elif out.is_dir() and any(p.name != LOCK and not p.name.endswith(PARTIAL)
+                              for p in out.iterdir()):  # our own debris is not foreign
+        raise Sc2DataError(f"output folder {out} is not empty and is not an sc2data dataset; "
+                           f"choose an empty or new folder")
+
+
+def create_folder(out: Path) -> None:
+    """Make ``out`` (and its parents) and prove it writable; undo on failure."""
+    made = not out.exists()
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = out / f".write-test{PARTIAL}"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as e:
+        if made and out.is_dir():
+            with contextlib.suppress(OSError):
+                out.rmdir()
+        raise Sc2DataError(f"cannot write to output folder {out}: {e.strerror or e}") from None
+
+
+def prepare_folder(config: RolloutConfig, out: Path) -> list[int]:
+    """Write the manifest if new; drop stale partials; check complete shards; return the rest."""
+    check_folder(config, out)  # again, under the lock
+    if not (out / MANIFEST).exists():
+        write_manifest(out, manifest_for(config))
+    for stale in out.glob(f"*{PARTIAL}"):
+        if stale.is_dir():  # an attempt folder of a Ray task (sc2data.scaleout.driver)
+            shutil.rmtree(stale)
+        else:
+            stale.unlink()
+    todo = []
+    for i in range(config.n_shards):
+        path = out / shard_name(i)
+        if not path.exists():
+            todo.append(i)
+            continue
+        shard = Shard(path)
+        try:
+            recorded = shard.attrs.get("settings")
+        finally:
+            shard.close()
+        if recorded != config.settings():
+            raise Sc2DataError(f"{path} was written with other settings; delete it (or the "
+                               f"folder) and rerun")
+    return todo
+
+
+def _fail_fast(config: RolloutConfig, env_factory: EnvFactory,
+               agent_factory: AgentFactory) -> None:
+    """Make an agent (and a simulator) once here, so that a broken setup fails before any
+    worker starts; the real game is not launched for this (its check is ``sc2_available``)."""
+    try:
+        agent_factory(0)
+        if config.env == "sim":
+            env_factory(0).close()
+    except ImportError as e:
+        raise Sc2DataError(f"this sc2data install is incomplete ({e})") from None
+
+
+@dataclass(frozen=True)
+class RolloutSummary:
+    """What a rollout call did."""
+
+    out: Path
+    shards_written: int
+    shards_kept: int
+    episodes: int
+    steps: int
+    seconds: float
+
+
+def rollout(config: RolloutConfig, out: str | os.PathLike[str], workers: int = 1,
+            progress: bool | None = None, env_factory: EnvFactory | None = None,
+            agent_factory: AgentFactory | None = None,
+            runner: ShardRunner | None = None) -> RolloutSummary:
+    """Roll out ``config`` into folder ``out`` with ``workers`` processes; resumable.
+
+    ``env_factory``/``agent_factory`` replace the defaults (``make_env(config.env, seed=…)``,
+    ``make_agent(config.agent, seed=…)``); they must be picklable for ``workers > 1``.
+    ``runner`` writes the shards instead of local processes (``sc2data.scaleout.driver``).
+    """
+    out = Path(out)
+    config.validate()
+    if workers < 1:
+        raise Sc2DataError(f"workers must be at least 1, not {workers}")
+    check_folder(config, out)
+    if env_factory is None:
+        if config.env == "sc2" and not envs.sc2_available():
+            envs.make_env("sc2")  # raises the one-line install hint
+        env_factory = default_env_factory(config)
+    if agent_factory is None:
+        from sc2data.game.agents import make_agent
+
+        make_agent(config.agent, seed=0)  # an unknown name fails here, before any writing
+        agent_factory = default_agent_factory(config)
+    started = time.perf_counter()
+    made = not out.exists()
+    create_folder(out)
+    try:
+        _fail_fast(config, env_factory, agent_factory)
+    except BaseException:
+        if made:
+            shutil.rmtree(out, ignore_errors=True)
+        raise
+    with FolderLock(out, exclusive=True) as lock:
+        todo = prepare_folder(config, out)
+        lock.share()
+        per_episode = config.max_steps or EPISODE_STEPS
+        total = sum(len(config.shard_episodes(i)) for i in todo) * per_episode
+        with progress_bar(total, desc="rollout", unit="step", show=progress) as bar:
+            job = functools.partial(write_shard, config, out, env_factory, agent_factory)
+            if runner is not None:
+                written = runner(config, out, todo, env_factory, agent_factory, bar)
+            elif workers == 1 or len(todo) <= 1:
+                written = {i: job(i, bar.update) for i in todo}
+            else:
+                written = run_parallel(job, todo, workers, out, bar.update, shard_name)
+            bar.total = bar.n
+            bar.refresh()
+        rows = [row for i in range(config.n_shards)
+                for row in written.get(i) or index_rows(out / shard_name(i))]
+        write_index(out, rows)
+    return RolloutSummary(out, len(todo), config.n_shards - len(todo), len(rows),
+                          sum(r["n_steps"] for r in rows), time.perf_counter() - started)

@@ -1,0 +1,365 @@
+"""BuildMarines agents as pysc2 ``BaseAgent``s, and a registry to make them by name.
+
+Every agent reads only what pysc2 observes (screen layers, ``player``, ``single_select``,
+``multi_select``, ``build_queue``, ``available_actions``) and answers with pysc2
+``actions.FunctionCall``s, so the same agent plays the embedded simulator and the real game.
+
+* ``random``: pysc2's own ``RandomAgent`` (uniform over available functions and arguments). Its
+  policy code is pysc2's, unchanged; only its numpy RNG is private (see :class:`SeededRandomAgent`).
+* ``reduced-random``: the paper's random agent over a reduced action set — each time its previous
+  macro action ends it picks one uniformly (train SCV, build a depot, build a barracks, train a
+  marine, send idle workers to mine, no-op) and plays it out as pysc2 selection and command calls.
+* ``scripted``: a build order — SCVs, depots ahead of supply, several barracks, marines nonstop,
+  idle SCVs back to mining, and, near the supply ceiling, its own marines killed with Attack_screen
+  (as the published scripted agent does) to make room for more.
+
+Macros are generators of calls over successive agent steps; each call is checked against
+``available_actions`` and, when unavailable, the macro is dropped and the agent plays ``no_op``.
+Lack of minerals is not visible there (the game refuses such orders silently), so the scripted
+agent checks ``player.minerals`` itself.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Generator, Iterator
+from typing import Any
+
+import numpy as np
+
+from sc2data._pysc2 import actions, features, units  # first: it makes pysc2 importable on 3.11
+from pysc2.agents import base_agent, random_agent  # isort: skip
+from sc2data.errors import Sc2DataError
+from sc2data.game.screen import ScreenView
+
+_F = actions.FUNCTIONS
+_P = features.Player
+NO_OP = _F.no_op()
+
+Macro = Iterator[actions.FunctionCall]
+Selecting = Generator[actions.FunctionCall, None, bool]
+"""A sub-macro that selects something; it returns whether the selection is as wanted."""
+
+
+class _NumpyWithOwnRandom:
+    """Stands in for the ``numpy`` module inside pysc2's ``random_agent``, with our RNG."""
+
+    def __init__(self, rng: np.random.RandomState) -> None:
+        self.random = rng
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(np, name)
+
+
+class SeededRandomAgent(random_agent.RandomAgent):
+    """pysc2's ``RandomAgent`` with a private, seeded numpy RNG.
+
+    ``RandomAgent.step`` draws from ``numpy.random`` (the global legacy RNG). For the duration
+    of each of our steps, the ``numpy`` name in pysc2's ``random_agent`` module is pointed at a
+    stand-in whose ``random`` is our own ``RandomState(seed)``, so the agent plays exactly what
+    ``numpy.random.seed(seed)`` followed by pysc2's agent would, yet neither disturbs nor is
+    disturbed by anyone else's use of the global RNG. (Swapping the global state in and out
+    instead costs ~10× the agent's own step.) The policy is pysc2's code, unchanged.
+    """
+
+    def __init__(self, seed: int) -> None:
+        super().__init__()
+        self._numpy = _NumpyWithOwnRandom(np.random.RandomState(seed))
+
+    def step(self, obs: Any) -> actions.FunctionCall:
+        module = random_agent.numpy
+        random_agent.numpy = self._numpy
+        try:
+            return super().step(obs)
+        finally:
+            random_agent.numpy = module
+
+
+class MacroAgent(base_agent.BaseAgent):
+    """Plays macro actions — generators of pysc2 calls over successive steps — one at a time."""
+
+    def __init__(self, seed: int) -> None:
+        super().__init__()
+        self.seed = seed
+        self.rng = np.random.default_rng(seed)
+        self.view: ScreenView | None = None
+        self._macro: Macro | None = None
+
+    def reset(self) -> None:
+        super().reset()
+        self._macro = None
+
+    def step(self, obs: Any) -> actions.FunctionCall:
+        super().step(obs)
+        self.view = ScreenView(obs)
+        for _ in range(2):  # finish the running macro, then maybe start the next in this step
+            if self._macro is None:
+                self._macro = self.next_macro()
+            try:
+                call = next(self._macro)
+            except StopIteration:
+                self._macro = None
+                continue
+            if not self.view.can(call):
+                self._macro = None
+                return NO_OP
+            return call
+        return NO_OP
+
+    def next_macro(self) -> Macro:
+        """The macro to play now that none is running."""
+        raise NotImplementedError
+
+    # --- building blocks: generators that yield calls and return whether they succeeded ---
+
+    def _v(self) -> ScreenView:
+        assert self.view is not None
+        return self.view
+
+    def select_unit(self, unit_type: int, xy: tuple[int, int] | None) -> Selecting:
+        """Select the unit under pixel ``xy`` alone (skipped if it is selected already)."""
+        if xy is None:
+            return False
+        v = self._v()
+        if v.selected_type() == unit_type and v.selected[xy[1], xy[0]]:
+            return True
+        yield _F.select_point("select", xy)
+        return self._v().selected_type() == unit_type
+
+    def select_scv(self) -> Selecting:
+        """Select one SCV off the mineral line, clicked at random (any SCV if none mines).
+
+        Builders come from the mineral line, as players take them; idle SCVs are left to the
+        gather macro. Always a fresh selection: the SCV still selected may be building what we
+        ordered last.
+        """
+        v = self._v()
+        scvs = v.own(units.Terran.SCV)
+        miners = scvs & v.near(v.minerals(), 3)
+        xy = v.random_pixel(miners if miners.any() else scvs, self.rng)
+        if xy is None:
+            return False
+        yield _F.select_point("select", xy)
+        return self._v().selected_type() == units.Terran.SCV
+
+    def train_scv(self) -> Macro:
+        v = self._v()
+        ok = yield from self.select_unit(units.Terran.CommandCenter,
+                                         v.centre_pixel(v.own(units.Terran.CommandCenter)))
+        if ok:
+            yield _F.Train_SCV_quick("now")
+
+    def build(self, function: Any, spot: Callable[[ScreenView, int], tuple[int, int] | None],
+              size: int) -> Macro:
+        ok = yield from self.select_scv()
+        if not ok:
+            return
+        xy = spot(self._v(), size)
+        if xy is not None:
+            yield function("now", xy)
+
+    def train_marine(self, xy: tuple[int, int] | None) -> Macro:
+        ok = yield from self.select_unit(units.Terran.Barracks, xy)
+        if ok:
+            yield _F.Train_Marine_quick("now")
+
+    def gather(self) -> Macro:
+        """Send every idle SCV to the mineral field nearest the Command Center."""
+        if self._v().player[_P.idle_worker_count] == 0:
+            return
+        yield _F.select_idle_worker("select_all")
+        v = self._v()
+        xy = v.nearest_pixel(v.minerals(), v.centre_pixel(v.own(units.Terran.CommandCenter)))
+        if xy is not None:
+            yield _F.Harvest_Gather_screen("now", xy)
+
+    def kill_marine(self) -> Macro:
+        """Select the army and have it attack one of its own marines."""
+        yield _F.select_army("select")
+        v = self._v()
+        xy = v.random_pixel(v.own(units.Terran.Marine), self.rng)
+        if xy is not None:
+            yield _F.Attack_screen("now", xy)
+
+    def no_op(self) -> Macro:
+        yield NO_OP
+
+    def save_up(self, minerals: int, then: Macro, patience: int) -> Macro:
+        """Wait (no_op) until ``minerals`` are banked, then play ``then``; give up after
+        ``patience`` steps. The game takes the cost only when an order is carried out."""
+        for _ in range(patience):
+            if self._v().player[_P.minerals] >= minerals:
+                yield from then
+                return
+            yield NO_OP
+
+
+def _random_spot(rng: np.random.Generator) -> Callable[[ScreenView, int], tuple[int, int] | None]:
+    return lambda v, size: v.random_pixel(v.placements(size), rng)
+
+
+class ReducedRandomAgent(MacroAgent):
+    """The paper's random agent over a reduced set of macro actions, picked uniformly.
+
+    A macro that costs minerals first waits for them (up to ``PATIENCE`` steps), as a player
+    choosing "build a barracks" would: spending whenever possible would leave a uniform random
+    agent too poor to ever afford a barracks.
+    """
+
+    MACROS: tuple[str, ...] = ("train_scv", "build_supply_depot", "build_barracks",
+                               "train_marine", "gather", "no_op")
+    COST: dict[str, int] = {"train_scv": 50, "build_supply_depot": 100, "build_barracks": 150,
+                            "train_marine": 50}
+    PATIENCE = 60
+
+    def next_macro(self) -> Macro:
+        name = self.MACROS[int(self.rng.integers(len(self.MACROS)))]
+        v = self._v()
+        if name == "build_supply_depot":
+            macro = self.build(_F.Build_SupplyDepot_screen, _random_spot(self.rng), 2)
+        elif name == "build_barracks":
+            macro = self.build(_F.Build_Barracks_screen, _random_spot(self.rng), 3)
+        elif name == "train_marine":
+            macro = self.train_marine(v.random_pixel(v.own(units.Terran.Barracks), self.rng))
+        else:
+            macro = getattr(self, name)()
+        cost = self.COST.get(name, 0)
+        return self.save_up(cost, macro, self.PATIENCE) if cost else macro
+
+
+class ScriptedAgent(MacroAgent):
+    """A build order: SCVs, depots ahead of supply, several barracks, marines nonstop."""
+
+    def __init__(self, seed: int, *, scvs: int = 22, barracks: int = 5, max_supply: int = 200,
+                 queue: int = 2) -> None:
+        super().__init__(seed)
+        self.scvs = scvs
+        """Workers to train up to (16 mine 8 fields two to a patch; a few more still pay)."""
+        self.barracks = barracks
+        self.max_supply = max_supply
+        """Supply ceiling: depots stop here, and marines are killed to stay under it."""
+        self.queue = queue
+        """Units kept queued per production building (minerals are spent when queued)."""
+        self._wait: dict[str, int] = {}
+        self._rax_turn = 0
+
+    def reset(self) -> None:
+        super().reset()
+        self._wait = {}
+        self._rax_turn = 0
+
+    def _ready(self, key: str) -> bool:
+        return self.steps >= self._wait.get(key, 0)
+
+    def _hold(self, key: str, steps: int) -> None:
+        self._wait[key] = self.steps + steps
+
+    def next_macro(self) -> Macro:
+        v = self._v()
+        minerals = int(v.player[_P.minerals])
+        used, cap = int(v.player[_P.food_used]), int(v.player[_P.food_cap])
+        free = cap - used
+        n_cc = len(v.blobs(v.own(units.Terran.CommandCenter)))
+        depots = len(v.blobs(v.own(units.Terran.SupplyDepot, units.Terran.SupplyDepotLowered)))
+        depots_building = depots - max(0, cap - 15 * n_cc) // 8
+        rax = v.blobs(v.own(units.Terran.Barracks))
+        margin = 4 + 2 * len(rax)
+
+        need_depot = (cap < min(self.max_supply, 200) and free <= margin
+                      and depots_building <= 0 and self._ready("depot"))
+        # Minerals are spent when the SCV places the building: keep them until it has.
+        reserve = 100 if need_depot or not self._ready("depot") else 0
+        reserve += 0 if self._ready("barracks") else 150
+        if need_depot and minerals >= 100 and v.placements(2).any():
+            self._hold("depot", 25)  # the SCV walks to the site before the depot shows
+            return self.build(_F.Build_SupplyDepot_screen, self._far_spot, 2)
+        if v.player[_P.idle_worker_count] > 0 and self._ready("gather"):
+            self._hold("gather", 4)
+            return self.gather()
+        if (v.player[_P.food_workers] < self.scvs and free >= 1 and minerals >= 50 + reserve
+                and self._ready("scv")):
+            self._hold("scv", 8)
+            return self._queue(units.Terran.CommandCenter,
+                               v.centre_pixel(v.own(units.Terran.CommandCenter)),
+                               _F.Train_SCV_quick)
+        if (len(rax) < self.barracks and cap > 15 * n_cc and minerals >= 150 + reserve
+                and self._ready("barracks") and v.placements(3).any()):
+            self._hold("barracks", 25)
+            return self.build(_F.Build_Barracks_screen, self._far_spot, 3)
+        if rax and free >= 1 and minerals >= 50 + reserve and self._ready("marine"):
+            self._rax_turn = (self._rax_turn + 1) % len(rax)
+            if self._rax_turn == 0:
+                self._hold("marine", 2)
+            return self._queue(units.Terran.Barracks, v.centre_pixel(rax[self._rax_turn]),
+                               _F.Train_Marine_quick)
+        if (free <= 2 and v.player[_P.army_count] > 1 and self._ready("kill")
+                and (cap >= min(self.max_supply, 200) or not v.placements(2).any())):
+            self._hold("kill", 3)
+            return self.kill_marine()
+        return self.no_op()
+
+    def _queue(self, unit_type: int, xy: tuple[int, int] | None, train: Any) -> Macro:
+        """Select a production building and top its queue up to ``self.queue``."""
+        ok = yield from self.select_unit(unit_type, xy)
+        while ok:
+            v = self._v()
+            if (len(v.build_queue) >= self.queue or v.player[_P.minerals] < 50
+                    or v.player[_P.food_used] >= v.player[_P.food_cap]):
+                return
+            yield train("now")
+            ok = self._v().selected_type() == unit_type
+
+    @staticmethod
+    def _far_spot(v: ScreenView, size: int) -> tuple[int, int] | None:
+        """The free spot farthest from the minerals, so buildings never block mining."""
+        ok = v.placements(size)
+        if not ok.any():
+            return None
+        ys, xs = np.nonzero(ok)
+        my, mx = np.nonzero(v.minerals())
+        if len(my):
+            d = (ys - my.mean()) ** 2 + (xs - mx.mean()) ** 2
+        else:
+            d = xs.astype(float)
+        i = int(np.argmax(d))
+        return int(xs[i]), int(ys[i])
+
+
+AGENTS: dict[str, Callable[[int], base_agent.BaseAgent]] = {
+    "random": SeededRandomAgent,
+    "reduced-random": ReducedRandomAgent,
+    "scripted": ScriptedAgent,
+}
+"""Agent factories by name; each takes the seed."""
+
+
+def make_agent(name: str, *, seed: int) -> base_agent.BaseAgent:
+    """A new agent by registry name; call ``setup(obs_spec, action_spec)`` before use.
+
+    Seeding: ``random`` draws from its own ``numpy.random.RandomState(seed)`` (the same calls
+    pysc2's agent makes after ``numpy.random.seed(seed)``); ``reduced-random`` and ``scripted``
+    draw from ``numpy.random.default_rng(seed)`` (the scripted agent only to pick which SCV to
+    click). None touches a global RNG, so one seed and one environment seed give one episode.
+    """
+    try:
+        factory = AGENTS[name]
+    except KeyError:
+        raise Sc2DataError(f"unknown agent {name!r}; choose one of: {', '.join(AGENTS)}") from None
+    return factory(seed)
+
+
+def play(env: Any, agent: base_agent.BaseAgent, steps: int | None = None) -> Iterator[Any]:
+    """Run one episode (or ``steps`` agent steps), yielding each TimeStep the agent sees.
+
+    Like pysc2's ``run_loop`` for one agent: ``setup`` from the env's specs, ``reset``, then step
+    until the episode's last TimeStep.
+    """
+    agent.setup(env.observation_spec()[0], env.action_spec()[0])
+    agent.reset()
+    timestep = env.reset()[0]
+    n = 0
+    while True:
+        yield timestep
+        n += 1
+        if timestep.last() or (steps is not None and n >= steps):
+            return
+        timestep = env.step([agent.step(timestep)])[0]

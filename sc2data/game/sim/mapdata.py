@@ -1,0 +1,232 @@
+"""BuildMarines as data: map geometry, camera, start state, and the game numbers of its units.
+
+Everything here is a constant read from the map or from StarCraft II's game data (brief §3–4),
+plus the coordinate transforms between world units, feature-screen pixels and minimap pixels,
+and the static grids (playable, pathable, buildable) the simulator and its drawing share.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from sc2data._pysc2 import units
+from sc2data.vocab import MINIMAP_SIZE, SCREEN_SIZE
+
+# --- Map geometry (BuildMarines.SC2Map, brief §3) -------------------------------------------
+
+MAP_SIZE = 64
+"""The map is 64×64 world units."""
+PLAYABLE = (19.94, 19.00, 45.94, 37.00)
+"""Playable region (x0, y0, x1, y1) in world units."""
+
+CC_POS = (29.83, 28.01)
+"""The Command Center's position."""
+MINERAL_POS: tuple[tuple[float, float], ...] = (
+    (23.0, 28.5), (24.0, 29.5), (23.0, 26.5), (25.0, 22.5),
+    (25.0, 32.5), (24.0, 23.5), (24.0, 31.5), (24.0, 25.5),
+)
+"""The 8 ``MineralField`` positions."""
+MINERAL_AMOUNT = 1800
+"""Minerals in each field at the start."""
+CC_RALLY = (23.0, 26.5)
+"""The CC's rally targets this mineral field at the start."""
+
+SCV_X_OFFSETS = (3.5, 4.5)
+"""The 12 SCVs stand in 2 columns this far from the CC in x, on a side chosen per episode."""
+SCV_Y_OFFSETS = (2.5, 1.5, 0.5, -0.5, -1.5, -2.5)
+"""... and in 6 rows at these y offsets from the CC."""
+
+START_MINERALS = 50
+START_WORKERS = 12
+
+GAME_LOOPS = 14_400
+"""The map's 900 game-second timer at 16 loops per game second."""
+
+# --- Camera (brief §3 "What the real game shows") --------------------------------------------
+
+SCREEN = SCREEN_SIZE
+MINIMAP = MINIMAP_SIZE
+CAMERA_WIDTH = 24.0
+"""pysc2's ``camera_width_world_units`` for feature layers."""
+CAMERA_CENTER = ((PLAYABLE[0] + PLAYABLE[2]) / 2, (PLAYABLE[1] + PLAYABLE[3]) / 2 - 3.0)
+"""Locked on the playable region's centre moved 3 units south: (32.94, 25.0)."""
+PX_PER_UNIT = SCREEN / CAMERA_WIDTH
+"""k = 64/24 screen pixels per world unit."""
+SCREEN_X0 = CAMERA_CENTER[0] - CAMERA_WIDTH / 2
+"""World x of the screen's left edge (20.94)."""
+SCREEN_Y0 = CAMERA_CENTER[1] + CAMERA_WIDTH / 2
+"""World y of the screen's top edge (37.0)."""
+
+
+def world_to_screen(x: float, y: float) -> tuple[float, float]:
+    """Continuous screen-pixel coordinates of a world point: ``((x−20.94)k, (37−y)k)``."""
+    return (x - SCREEN_X0) * PX_PER_UNIT, (SCREEN_Y0 - y) * PX_PER_UNIT
+
+
+def screen_to_world(px: float, py: float) -> tuple[float, float]:
+    """The world point an action at integer screen pixel (px, py) aims at: the pixel's centre.
+
+    pysc2's ``transform.PixelToCoord`` maps a pixel back to its centre (``+0.5``).
+    """
+    return SCREEN_X0 + (px + 0.5) / PX_PER_UNIT, SCREEN_Y0 - (py + 0.5) / PX_PER_UNIT
+
+
+def world_to_minimap(x: float, y: float) -> tuple[float, float]:
+    """Continuous minimap coordinates, as pysc2's ``Features.init_camera`` builds them.
+
+    World → top-left origin ``(x, map_h − y)`` → scale ``minimap / max(map_size)`` = 1 here,
+    since the 64×64 map is drawn whole on the 64×64 minimap (``crop_to_playable_area=False``).
+    """
+    s = MINIMAP / MAP_SIZE
+    return x * s, (MAP_SIZE - y) * s
+
+
+def minimap_to_world(px: float, py: float) -> tuple[float, float]:
+    """The world point at the centre of minimap pixel (px, py)."""
+    s = MINIMAP / MAP_SIZE
+    return (px + 0.5) / s, MAP_SIZE - (py + 0.5) / s
+
+
+# --- Unit data (LotV game data, brief §4) ----------------------------------------------------
+
+LOOPS_PER_GAME_SECOND = 16
+
+
+@dataclass(frozen=True)
+class UnitData:
+    """Game numbers of one unit type; times in game loops, speeds in world units per loop."""
+
+    unit_type: int
+    radius: float
+    hp: int
+    armor: int = 0
+    minerals: int = 0
+    build_loops: int = 0
+    supply_cost: int = 0
+    supply_provided: int = 0
+    footprint: tuple[int, int] = (0, 0)
+    """Placement footprint in grid cells (structures and mineral fields)."""
+    speed: float = 0.0
+    structure: bool = False
+
+
+SCV = units.Terran.SCV
+MARINE = units.Terran.Marine
+CC = units.Terran.CommandCenter
+DEPOT = units.Terran.SupplyDepot
+BARRACKS = units.Terran.Barracks
+MINERAL = units.Neutral.MineralField
+
+UNIT_DATA: dict[int, UnitData] = {
+    # Radii and hit points as the game's API reports them for these unit types (a raw-unit dump
+    # of SC2 4.x: SCV and Marine 0.375, CC 2.75, SupplyDepot 1.25, Barracks 1.8125, and 1.125
+    # for mineral fields). Speeds are the data's per-game-second values (SCV 2.8125,
+    # Marine 2.25) / 16 loops.
+    SCV: UnitData(SCV, 0.375, 45, minerals=50, build_loops=272, supply_cost=1,
+                  speed=2.8125 / LOOPS_PER_GAME_SECOND),
+    MARINE: UnitData(MARINE, 0.375, 45, minerals=50, build_loops=400, supply_cost=1,
+                     speed=2.25 / LOOPS_PER_GAME_SECOND),
+    CC: UnitData(CC, 2.75, 1500, armor=1, minerals=400, build_loops=1600, supply_provided=15,
+                 footprint=(5, 5), structure=True),
+    DEPOT: UnitData(DEPOT, 1.25, 400, armor=1, minerals=100, build_loops=480,
+                    supply_provided=8, footprint=(2, 2), structure=True),
+    BARRACKS: UnitData(BARRACKS, 1.8125, 1000, armor=1, minerals=150, build_loops=1040,
+                       footprint=(3, 3), structure=True),
+    MINERAL: UnitData(MINERAL, 1.125, 0, footprint=(2, 1), structure=True),
+}
+
+MAX_SUPPLY = 200
+QUEUE_LIMIT = 5
+"""Train queues hold 5 units."""
+
+# Marine weapon (Gauss Rifle): 6 damage, period 0.8608 game seconds, range 5.
+MARINE_DAMAGE = 6
+MARINE_COOLDOWN = 0.8608 * LOOPS_PER_GAME_SECOND
+MARINE_RANGE = 5.0
+
+# Mining (brief §4): 5 minerals a trip, a patch is busy ≈44.6 loops per harvest.
+HARVEST_LOOPS = 44.6
+CARRY = 5
+PATCH_CLEAR_LOOPS = 10.0
+"""Loops after a harvest before the next worker can start on the same field (the first
+turning away, the second stepping in). It caps a field at 5 / 54.6 minerals per loop, so a third
+worker on a field adds little, as in the game."""
+MINING_LEG_OVERHEAD = 29.0
+"""Loops added to each mining leg (patch→CC, CC→patch) beyond distance/speed.
+
+The straight-line legs here are 1.5–3 world units (≈8–15 loops); a real SCV accelerates,
+decelerates, turns and paths around the footprints, which the game's traces show as a ≈125-loop
+round trip (≈0.04 minerals per loop per worker). This one number is calibrated so the income
+matches the brief's real-game traces: first minerals ≈120 loops in (SCVs on the mineral side),
+≈0.52 minerals/loop with 12–14 SCVs, ≈0.63 at saturation (16); ``tests/sim/test_economy.py``
+holds it there.
+"""
+WORKERS_PER_PATCH = 2
+"""Workers spread to another field when theirs already has this many (the game's bouncing)."""
+
+# --- Static grids ------------------------------------------------------------------------------
+
+
+def playable_cells() -> np.ndarray:
+    """Bool grid [cy, cx] of 1×1 world cells whose centres lie in the playable region."""
+    c = np.arange(MAP_SIZE) + 0.5
+    x0, y0, x1, y1 = PLAYABLE
+    inx = (c >= x0) & (c <= x1)
+    iny = (c >= y0) & (c <= y1)
+    return iny[:, None] & inx[None, :]
+
+
+def footprint_cells(x: float, y: float, footprint: tuple[int, int]) -> tuple[slice, slice]:
+    """Grid slices (rows, cols) of the cells a footprint centred at (x, y) covers."""
+    w, h = footprint
+    cx0 = int(math.floor(x - w / 2 + 0.5))
+    cy0 = int(math.floor(y - h / 2 + 0.5))
+    return slice(cy0, cy0 + h), slice(cx0, cx0 + w)
+
+
+def snap_to_grid(x: float, y: float, footprint: tuple[int, int]) -> tuple[float, float]:
+    """Where the game centres a footprint placed at (x, y): whole cells, like placement does.
+
+    Even sizes centre on grid lines, odd sizes on cell centres.
+    """
+    w, h = footprint
+    sx = round(x) if w % 2 == 0 else math.floor(x) + 0.5
+    sy = round(y) if h % 2 == 0 else math.floor(y) + 0.5
+    return float(sx), float(sy)
+
+
+def screen_pixel_cells() -> tuple[np.ndarray, np.ndarray]:
+    """For each screen row and column, the world grid cell its pixel centre falls in."""
+    c = np.arange(SCREEN) + 0.5
+    xs = np.floor(SCREEN_X0 + c / PX_PER_UNIT).astype(np.int64)
+    ys = np.floor(SCREEN_Y0 - c / PX_PER_UNIT).astype(np.int64)
+    return np.clip(ys, 0, MAP_SIZE - 1), np.clip(xs, 0, MAP_SIZE - 1)
+
+
+def minimap_pixel_cells() -> tuple[np.ndarray, np.ndarray]:
+    """For each minimap row and column, the world grid cell its pixel centre falls in."""
+    c = np.arange(MINIMAP) + 0.5
+    xs = np.floor(c * MAP_SIZE / MINIMAP).astype(np.int64)
+    ys = np.floor(MAP_SIZE - c * MAP_SIZE / MINIMAP).astype(np.int64)
+    return np.clip(ys, 0, MAP_SIZE - 1), np.clip(xs, 0, MAP_SIZE - 1)
+
+
+def camera_minimap_mask() -> np.ndarray:
+    """Minimap pixels whose centres lie inside the screen's world rectangle (the camera layer)."""
+    c = np.arange(MINIMAP) + 0.5
+    wx = c * MAP_SIZE / MINIMAP
+    wy = MAP_SIZE - c * MAP_SIZE / MINIMAP
+    inx = (wx >= SCREEN_X0) & (wx <= SCREEN_X0 + CAMERA_WIDTH)
+    iny = (wy <= SCREEN_Y0) & (wy >= SCREEN_Y0 - CAMERA_WIDTH)
+    return iny[:, None] & inx[None, :]
+
+
+HEIGHT_VALUE = 127
+"""height_map value of the flat playable ground.
+
+BuildMarines is one flat plateau; the map's absolute terrain height is not in our sources, so we
+draw its encoded value as mid-scale. Outside the playable region the game draws nothing (0).
+"""

@@ -1,0 +1,127 @@
+"""A trained MEM as a scorer: ``sc2data.load_model(RUN).distance(stacks, texts)``.
+
+The object a reinforcement-learning loop calls every step (brief §1: narration as a dense shaping
+reward): batched, on CPU or GPU, with command embeddings cached (a narration repeats the same few
+commands), and the same input packing as training. Evaluation and t-SNE use it too.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sc2data.errors import MissingDependencyError, Sc2DataError
+from sc2data.schema import Schema, StackBatch
+
+
+class MEMScorer:
+    """A trained MEM: state and command embeddings, distances, matches."""
+
+    def __init__(self, model: Any, meta: Mapping[str, Any], device: Any) -> None:
+        from sc2data.model.words import WordVectors
+
+        self.model, self.meta, self.device = model, dict(meta), device
+        self.schema: Schema = model.schema
+        self.threshold: float = float(meta.get("threshold", 0.5))
+        vectors = model.command.words.weight[1:].detach().cpu().numpy()
+        self.words = WordVectors(tuple(meta["words"]), vectors, str(meta.get("vectors_source")))
+        self.commands: list[dict[str, Any]] = list(meta.get("commands", []))
+        self._keys = model.state.keys()
+        self._text_cache: dict[str, np.ndarray] = {}
+
+    def __repr__(self) -> str:
+        return (f"MEMScorer(layers={len(self.schema.layers)}, vocab={len(self.words.words)}, "
+                f"dim={self.model.cfg.dim}, device={self.device})")
+
+    def embed_states(self, stacks: StackBatch | Mapping[str, np.ndarray],
+                     batch_size: int = 256) -> np.ndarray:
+        """``(B, dim)`` float32 state embeddings of a batch of two-frame stacks."""
+        import torch
+
+        from sc2data.model.mem import model_inputs
+
+        arrays = stacks.arrays if isinstance(stacks, StackBatch) else stacks
+        missing = [k for k in self._keys if k not in arrays]
+        if missing:
+            raise Sc2DataError(f"the stacks lack {missing[0]!r}, which the model was trained on "
+                               f"(it reads {len(self._keys)} keys, schema v{self.schema.version})")
+        for l in self.schema.layers:
+            size = self.schema.size(l.group)
+            shape = np.shape(arrays[l.key])[1:] if l.key in self._keys else (2, size, size)
+            if shape != (2, size, size):
+                raise Sc2DataError(f"{l.key} has shape {shape} per stack; the model expects "
+                                   f"(2, {size}, {size})")
+        n = len(arrays[self._keys[0]])
+        out = []
+        with torch.no_grad():
+            for s in range(0, n, batch_size):
+                part = {k: np.asarray(arrays[k][s:s + batch_size]) for k in self._keys}
+                x = model_inputs(self.model, part, self.device)
+                out.append(self.model.state(x).float().cpu().numpy())
+        return np.concatenate(out) if out else np.zeros((0, self.model.cfg.dim), np.float32)
+
+    def embed_texts(self, texts: Sequence[str]) -> np.ndarray:
+        """``(T, dim)`` float32 command embeddings; each distinct text is encoded once, ever."""
+        import torch
+
+        new = sorted({t for t in texts if t not in self._text_cache})
+        if new:
+            ids, lengths = self.words.encode(new)
+            with torch.no_grad():
+                e = self.model.command(torch.from_numpy(ids).to(self.device),
+                                       torch.from_numpy(lengths)).float().cpu().numpy()
+            self._text_cache.update(zip(new, e))
+        if not len(texts):
+            return np.zeros((0, self.model.cfg.dim), np.float32)
+        return np.stack([self._text_cache[t] for t in texts])
+
+    def distance(self, stacks: StackBatch | Mapping[str, np.ndarray],
+                 texts: Sequence[str] | str) -> np.ndarray:
+        """``(B,)`` distances of stack i to text i (one text: to every stack)."""
+        xs = self.embed_states(stacks)
+        texts = [texts] if isinstance(texts, str) else list(texts)
+        if len(texts) not in (1, len(xs)):
+            raise Sc2DataError(f"got {len(xs)} stacks and {len(texts)} texts; pass one text per "
+                               f"stack, or a single text for all")
+        return np.linalg.norm(xs - self.embed_texts(texts), axis=-1)
+
+    def distances(self, stacks: StackBatch | Mapping[str, np.ndarray],
+                  texts: Sequence[str]) -> np.ndarray:
+        """``(B, T)`` distances of every stack to every text."""
+        return pairwise(self.embed_states(stacks), self.embed_texts(list(texts)))
+
+    def matches(self, stacks: StackBatch | Mapping[str, np.ndarray],
+                texts: Sequence[str] | str) -> np.ndarray:
+        """``(B,)`` booleans: distance below the model's threshold (0.5)."""
+        return self.distance(stacks, texts) < self.threshold
+
+
+def pairwise(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Euclidean distances between the rows of ``a`` and of ``b``: ``(len(a), len(b))``."""
+    return np.linalg.norm(a[:, None, :] - b[None, :, :], axis=-1)
+
+
+def load_model(run: str | os.PathLike[str], device: str = "cpu") -> MEMScorer:
+    """Load ``RUN/best.pt`` (or a checkpoint file) as a :class:`MEMScorer` on ``device``."""
+    try:
+        import torch  # noqa: F401
+    except ImportError:
+        raise MissingDependencyError("torch", "train", "sc2data.load_model") from None
+    from sc2data.model.mem import load_checkpoint, resolve_device
+
+    path = Path(run)
+    if not path.exists():
+        raise Sc2DataError(f"run folder {path} does not exist; pass the --out of sc2data train")
+    if path.is_dir():
+        path = path / "best.pt"
+    dev = resolve_device(device)
+    model, meta = load_checkpoint(path, dev)
+    config = path.with_name("config.json")
+    if "config" not in meta and config.is_file():
+        meta["config"] = json.loads(config.read_text())
+    return MEMScorer(model, meta, dev)

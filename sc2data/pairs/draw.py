@@ -1,0 +1,193 @@
+"""Turn labels into the (command, state, target) pairs the mutual-embedding model trains on.
+
+Kinds of pair (paper §3.3, "Dataset"):
+
+* **matched** — a state a command's rule fires on, with that command; target distance 0.
+* **mismatched** — the same state with another command, drawn uniformly among the commands whose
+  rules do *not* fire on it (so a mismatch is never secretly true); target 1.
+* **null** — a state no command's rule fires on, with a command drawn uniformly; target 1.
+
+States are assigned to train/val/test either by episode (default: no episode on two sides, so
+adjacent, near-identical frames cannot leak across the split) or at random over pairs, as the paper
+did. Each command's quota and the null quota are apportioned over the splits by largest remainder,
+so the totals are exactly the recipe's. Everything is drawn from one seeded generator.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pyarrow as pa
+
+from sc2data.errors import Sc2DataError
+from sc2data.recipe import Recipe, apportion
+from sc2data.vocab import SPLITS
+
+PAIR_SCHEMA = pa.schema([
+    ("split", pa.string()), ("episode", pa.int64()), ("step", pa.int32()),
+    ("command_id", pa.string()), ("command", pa.string()), ("target", pa.float32()),
+    ("kind", pa.string()), ("label", pa.string()),
+])
+"""Columns of pairs.parquet before packing adds ``state`` (see docs/pairset.md)."""
+
+
+class NotEnoughStates(Sc2DataError):
+    """The labelled data holds too few positives (or nulls) for the recipe's quotas."""
+
+
+@dataclass(frozen=True)
+class Labelled:
+    """Every stack of a dataset with which of the recipe's rules fire on it."""
+
+    episode: np.ndarray  # (N,) int64
+    step: np.ndarray  # (N,) int32
+    fires: np.ndarray  # (N, C) bool, columns in the recipe's command order
+
+    def __post_init__(self) -> None:
+        n = len(self.episode)
+        if len(self.step) != n or self.fires.shape[0] != n:
+            raise ValueError("episode, step and fires must have the same length")
+
+
+def _assign_episodes(episodes: np.ndarray, fractions: Sequence[float],
+                     rng: np.random.Generator) -> dict[int, int]:
+    """Map each episode to a split index, shuffled, in proportion to the fractions."""
+    unique = np.unique(episodes)
+    if len(unique) < len(fractions):
+        raise NotEnoughStates(f"an episode-disjoint split needs at least {len(fractions)} "
+                              f"episodes; the data has {len(unique)}: roll out more episodes")
+    counts = apportion(len(unique), fractions)
+    for i, c in enumerate(counts):  # every split gets at least one episode
+        if c == 0:
+            counts[int(np.argmax(counts))] -= 1
+            counts[i] = 1
+    shuffled = rng.permutation(unique)
+    split_of = np.repeat(np.arange(len(fractions)), counts)
+    return {int(e): int(s) for e, s in zip(shuffled, split_of)}
+
+
+def build_pairs(recipe: Recipe, data: Labelled) -> pa.Table:
+    """Draw the recipe's pairs from labelled stacks; deterministic for ``recipe.seed``."""
+    order = np.lexsort((data.step, data.episode))  # input order must not matter
+    episode, step, fires = data.episode[order], data.step[order], data.fires[order]
+    commands = recipe.commands
+    n_cmd = len(commands)
+    rng = np.random.default_rng(np.random.SeedSequence([recipe.seed, 0x5C2DA7A]))
+    fractions = recipe.split.fractions
+    is_null = ~fires.any(axis=1)
+
+    if recipe.split.method == "episode":
+        split_map = _assign_episodes(episode, fractions, rng)
+        split_of = np.fromiter((split_map[int(e)] for e in episode), np.int64, len(episode))
+        quotas = np.array([apportion(recipe.pairs.states_per_command, fractions)] * n_cmd).T
+        null_quota = apportion(recipe.pairs.null_states, fractions)
+        pools = list(range(len(SPLITS)))
+    else:  # random: draw from the whole pool, split the pairs afterwards
+        split_of = np.zeros(len(episode), np.int64)
+        quotas = np.array([[recipe.pairs.states_per_command] * n_cmd])
+        null_quota = [recipe.pairs.null_states]
+        pools = [0]
+
+    # A state that satisfies every command has no possible mismatch: it is never drawn.
+    used = fires.all(axis=1)
+    chosen: list[tuple[int, np.ndarray, np.ndarray]] = []  # (pool, state idx, command idx)
+    shortages: list[tuple[str, int, int, float]] = []
+    for pool in pools:
+        in_pool = split_of == pool
+        # Rarest command first, so a stack satisfying two commands serves the scarcer one.
+        rarity = np.argsort((fires & in_pool[:, None]).sum(axis=0), kind="stable")
+        for c in rarity:
+            need = int(quotas[pool][c])
+            cand = np.flatnonzero(fires[:, c] & in_pool & ~used)
+            if len(cand) < need:
+                shortages.append(_shortage(commands[c].id, pool, recipe, len(cand), need,
+                                           fires[:, c].sum(), episode))
+                continue
+            pick = np.sort(rng.choice(cand, size=need, replace=False))
+            used[pick] = True
+            chosen.append((pool, pick, np.full(need, c)))
+        need = null_quota[pool]
+        cand = np.flatnonzero(is_null & in_pool)
+        if len(cand) < need:
+            shortages.append(_shortage("null", pool, recipe, len(cand), need, is_null.sum(),
+                                       episode))
+        else:
+            chosen.append((pool, np.sort(rng.choice(cand, size=need, replace=False)),
+                           np.full(need, -1)))
+    if shortages:
+        raise NotEnoughStates(_shortage_message(shortages, len(np.unique(episode))))
+
+    columns: dict[str, list[np.ndarray]] = {k: [] for k in ("pool", "idx", "cmd", "target",
+                                                             "kind", "label")}
+
+    def add(pool: int, idx: np.ndarray, cmd: np.ndarray, target: float, kind: str,
+            label: np.ndarray) -> None:
+        columns["pool"].append(np.full(len(idx), pool))
+        columns["idx"].append(idx)
+        columns["cmd"].append(cmd)
+        columns["target"].append(np.full(len(idx), target, np.float32))
+        columns["kind"].append(np.full(len(idx), kind, object))
+        columns["label"].append(label)
+
+    ids = np.array([c.id for c in commands] + [""], dtype=object)  # ids[-1] = "" for null
+    for pool, idx, cmd in chosen:
+        if cmd.size and cmd[0] < 0:
+            add(pool, idx, rng.integers(0, n_cmd, len(idx)), 1.0, "null", ids[cmd])
+            continue
+        add(pool, idx, cmd, 0.0, "matched", ids[cmd])
+        add(pool, idx, _draw_mismatch(fires[idx], rng), 1.0, "mismatched", ids[cmd])
+
+    pool = np.concatenate(columns["pool"])
+    idx = np.concatenate(columns["idx"])
+    cmd = np.concatenate(columns["cmd"])
+    if recipe.split.method == "random":
+        pool = rng.permutation(np.repeat(np.arange(len(SPLITS)), apportion(len(idx), fractions)))
+    texts = np.array([c.text for c in commands], dtype=object)
+    table = pa.table({
+        "split": pa.array(np.array(SPLITS, dtype=object)[pool], pa.string()),
+        "episode": pa.array(episode[idx], pa.int64()),
+        "step": pa.array(step[idx], pa.int32()),
+        "command_id": pa.array(ids[cmd], pa.string()),
+        "command": pa.array(texts[cmd], pa.string()),
+        "target": pa.array(np.concatenate(columns["target"]), pa.float32()),
+        "kind": pa.array(np.concatenate(columns["kind"]), pa.string()),
+        "label": pa.array(np.concatenate(columns["label"]), pa.string()),
+    }, schema=PAIR_SCHEMA)
+    # Stable, readable order: by split, then by state.
+    keys = np.lexsort((step[idx], episode[idx], pool))
+    return table.take(pa.array(keys))
+
+
+def _draw_mismatch(fires: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """For each state, a command drawn uniformly among those whose rule does not fire on it."""
+    allowed = ~fires
+    # Uniform choice among allowed columns: rank random keys, take the best allowed one.
+    keys = np.where(allowed, rng.random(allowed.shape), -1.0)
+    return keys.argmax(axis=1)
+
+
+def _shortage(what: str, pool: int, recipe: Recipe, found: int, need: int, total: int,
+              episode: np.ndarray) -> tuple[str, int, int, float]:
+    """(what, found, need, estimated extra episodes) for one quota that cannot be met."""
+    per_episode = total / max(len(np.unique(episode)), 1)
+    if recipe.split.method == "episode":
+        per_episode *= recipe.split.fractions[pool]  # a new episode lands in this split so often
+    more = (need - found) / per_episode if per_episode > 0 else float("inf")
+    return what, found, need, more
+
+
+def _shortage_message(shortages: list[tuple[str, int, int, float]], n_episodes: int) -> str:
+    """One line: what was found against what the recipe needs, and how much more to roll out."""
+    found: dict[str, list[int]] = {}
+    for what, f, n, _ in shortages:
+        found.setdefault(what, [0, 0])
+        found[what][0] += f
+        found[what][1] += n
+    more = max(m for *_, m in shortages)
+    hint = (f"roll out about {int(np.ceil(more))} more episodes (the data has {n_episodes})"
+            if np.isfinite(more) else "some command never fires in the data; check the agent "
+            "and the rule")
+    parts = ", ".join(f"{w} {f} of {n} needed" for w, (f, n) in found.items())
+    return f"too few labelled states for the recipe: {parts}; {hint}"

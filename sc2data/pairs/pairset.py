@@ -1,0 +1,205 @@
+"""``sc2data pair``: labels + recipe → ``pairs.parquet``, ``pairset.json`` and packed splits.
+
+The output folder is the trainer's input (``docs/pairset.md``). It is built under a temporary
+name and renamed into place when complete, so an interrupted run never leaves a pair set that
+looks finished; a folder already built from the same recipe, labels and data is kept as it is.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.parquet as pq
+
+from sc2data.errors import Sc2DataError
+from sc2data.pairs.packed import PackedWriter
+from sc2data.pairs.draw import Labelled, build_pairs
+from sc2data.provenance import versions
+from sc2data.recipe import Recipe
+from sc2data.vocab import SPLITS
+
+FORMAT = "sc2data.pairset"
+FORMAT_VERSION = 1
+PAIRS_FILE = "pairs.parquet"
+META_FILE = "pairset.json"
+READ_BATCH = 1024
+"""Stacks read from the rollout shards per call while packing."""
+
+
+@dataclass(frozen=True)
+class PairsetSummary:
+    """What ``sc2data pair`` made (or found already made)."""
+
+    out: Path
+    counts: dict[str, dict[str, int]]
+    """split → kind → pairs."""
+    states: dict[str, int]
+    seconds: float
+    up_to_date: bool = False
+
+    def table(self) -> str:
+        """A fixed-width summary: pairs per split and kind, states per split."""
+        kinds = ("matched", "mismatched", "null")
+        lines = [f"{'split':<6} {'matched':>9} {'mismatched':>11} {'null':>8} {'pairs':>9} "
+                 f"{'states':>8}"]
+        for s in SPLITS:
+            c = self.counts.get(s, {})
+            lines.append(f"{s:<6} " + " ".join(f"{c.get(k, 0):>{w},}" for k, w in
+                                              zip(kinds, (9, 11, 8))) +
+                         f" {sum(c.values()):>9,} {self.states.get(s, 0):>8,}")
+        return "\n".join(lines)
+
+
+def labelled_stacks(recipe: Recipe, data: Path) -> tuple[Labelled, dict[str, Any]]:
+    """Every stack of ``data`` with the recipe's rules' verdicts, from ``sc2data label``'s files."""
+    from sc2data.labels.label import read_labels
+
+    labels = read_labels(data)
+    ids = [r["id"] for r in labels.meta["rules"]]
+    missing = [c.id for c in recipe.commands if c.id not in ids]
+    if missing:
+        raise Sc2DataError(f"the labels in {data} have no rule {', '.join(missing)} (labelled "
+                           f"with: {', '.join(ids)}); relabel with sc2data label {data} --rules "
+                           f"{','.join(recipe.rule_ids)}")
+    t = labels.stacks
+    fires = np.stack([t[c.id].to_numpy(zero_copy_only=False) for c in recipe.commands], axis=1)
+    data_labelled = Labelled(t["episode"].to_numpy().astype(np.int64),
+                             t["step"].to_numpy().astype(np.int32), fires.astype(bool))
+    return data_labelled, labels.meta
+
+
+def fingerprint(paths: list[Path]) -> str:
+    """sha256 over the given files' bytes, in order."""
+    h = hashlib.sha256()
+    for p in paths:
+        with open(p, "rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                h.update(block)
+    return h.hexdigest()
+
+
+def _identity(recipe: Recipe, labels_meta: dict[str, Any]) -> dict[str, Any]:
+    """What decides a pair set's content: the recipe and the labels it was drawn from."""
+    identity = {"recipe": recipe.to_dict(), "labels": labels_meta.get("fingerprint"),
+                "labels_created": labels_meta.get("created")}
+    return json.loads(json.dumps(identity))  # as it reads back from pairset.json
+
+
+def _existing(out: Path, identity: dict[str, Any]) -> dict[str, Any] | None:
+    meta_path = out / META_FILE
+    if not meta_path.is_file():
+        return None
+    try:
+        meta = json.loads(meta_path.read_text())
+    except (OSError, json.JSONDecodeError):
+        return None
+    return meta if meta.get("identity") == identity else None
+
+
+def _pack_split(ds: Any, split: str, pairs: pa.Table, path: Path, seed: int,
+                progress: Any) -> tuple[pa.Table, int]:
+    """Copy the split's distinct stacks into ``path``; add each pair's ``state`` row.
+
+    Rows go episode by episode, the episodes in a seeded random order and each episode's steps
+    in order: reads stay nearly sequential (an episode's chunks are decoded once), while any
+    block of rows mixes several episodes from anywhere in the data for the trainer to shuffle.
+    """
+    episode = pairs["episode"].to_numpy()
+    step = pairs["step"].to_numpy().astype(np.int64)
+    keys = episode * (1 << 20) + step  # episodes have far fewer than 2**20 steps
+    unique, inverse = np.unique(keys, return_inverse=True)
+    rng = np.random.default_rng(np.random.SeedSequence([seed, SPLITS.index(split), 0x9AC4]))
+    episodes = np.unique(unique >> 20)
+    rank = dict(zip(episodes.tolist(), rng.permutation(len(episodes)).tolist()))
+    order = np.lexsort((unique, np.array([rank[e] for e in (unique >> 20).tolist()])))
+    row_of = np.empty(len(unique), np.int64)  # row r of the file holds stack unique[order[r]]
+    row_of[order] = np.arange(len(unique))
+    writer = PackedWriter(path, ds.schema, len(unique), attrs={"split": split})
+    try:
+        for start in range(0, len(unique), READ_BATCH):
+            k = unique[order[start:start + READ_BATCH]]
+            writer.write(ds.read(k >> 20, k & ((1 << 20) - 1)))
+            progress.update(len(k))
+        writer.close()
+    except BaseException:
+        writer.abort()
+        raise
+    return pairs.append_column("state", pa.array(row_of[inverse], pa.int64())), len(unique)
+
+
+def make_pairset(recipe: Recipe, data: str | os.PathLike[str], out: str | os.PathLike[str], *,
+                 progress: bool | None = None) -> PairsetSummary:
+    """Build the recipe's pair set from the labelled dataset ``data`` into the folder ``out``."""
+    from sc2data.data.dataset import open_dataset
+    from sc2data.progress import bar as progress_bar
+
+    started = time.perf_counter()
+    data, out = Path(data), Path(out)
+    labelled, labels_meta = labelled_stacks(recipe, data)
+    identity = _identity(recipe, labels_meta)
+    done = _existing(out, identity)
+    if done is not None:
+        return PairsetSummary(out, done["counts"], {s: v["states"] for s, v in
+                                                    done["splits"].items()},
+                              time.perf_counter() - started, up_to_date=True)
+    if out.exists() and any(out.iterdir()):
+        raise Sc2DataError(f"{out} already holds something other than this recipe's pair set; "
+                           f"choose another --out or delete it")
+    pairs = build_pairs(recipe, labelled)
+    ds = open_dataset(data)
+    tmp = out.with_name(f".{out.name}.partial")
+    shutil.rmtree(tmp, ignore_errors=True)
+    (tmp / "packed").mkdir(parents=True)
+    try:
+        parts, states = [], {}
+        n_states = len(np.unique(pc.add(pc.multiply(pairs["episode"], 1 << 20),
+                                        pc.cast(pairs["step"], pa.int64())).to_numpy()))
+        with progress_bar(n_states, desc="pack", unit="stack", show=progress) as bar:
+            for split in SPLITS:
+                sub = pairs.filter(pc.equal(pairs["split"], split))
+                part, states[split] = _pack_split(ds, split, sub, tmp / "packed" / f"{split}.h5",
+                                                  recipe.seed, bar)
+                parts.append(part)
+        table = pa.concat_tables(parts)
+        pq.write_table(table, tmp / PAIRS_FILE)
+        counts: dict[str, dict[str, int]] = {}
+        for s, k in zip(table["split"].to_pylist(), table["kind"].to_pylist()):
+            counts.setdefault(s, {}).setdefault(k, 0)
+            counts[s][k] += 1
+        files = [tmp / PAIRS_FILE] + [tmp / "packed" / f"{s}.h5" for s in SPLITS]
+        meta = {
+            "format": FORMAT, "format_version": FORMAT_VERSION,
+            "recipe_name": recipe.name, "seed": recipe.seed, "recipe": recipe.to_dict(),
+            "schema": ds.schema.to_dict(),
+            "commands": [{"id": c.id, "text": c.text, "paraphrases": list(c.paraphrases)}
+                         for c in recipe.commands],
+            "splits": {s: {"pairs": sum(counts.get(s, {}).values()), "states": states[s]}
+                       for s in SPLITS},
+            "counts": counts,
+            "data": {"path": str(data.resolve()), "settings": ds.settings},
+            "labels": {"fingerprint": labels_meta.get("fingerprint"),
+                       "rules": labels_meta.get("rules")},
+            "identity": identity,
+            "fingerprint": fingerprint(files),
+            "versions": versions(),
+        }
+        (tmp / META_FILE).write_text(json.dumps(meta, indent=2, default=str))
+        if out.exists():
+            out.rmdir()  # empty (checked above)
+        os.replace(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    finally:
+        ds.close()
+    return PairsetSummary(out, counts, states, time.perf_counter() - started)

@@ -1,0 +1,142 @@
+"""Evaluation: metrics by hand, the report of a real run, t-SNE, and the CLI's errors."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from tests.cli import assert_one_line_error, run_cli
+from tests.mem_helpers import (tiny_pairset,  # noqa: E402
+                         train_tiny)
+
+import sc2data.model.evaluate as ev  # noqa: E402
+from sc2data import load_model  # noqa: E402
+from sc2data.model.evaluate import accuracy, auc, evaluate, roc_auc  # noqa: E402
+from sc2data.pairs.loader import PairSet  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("eval")
+    data = tiny_pairset(root / "data")
+    return train_tiny(data, root / "run", epochs=2, lr=2e-3)
+
+
+def test_accuracy_by_hand() -> None:
+    d = np.array([0.1, 0.6, 0.49, 0.5, 0.9, 0.2])
+    y = np.array([0, 0, 1, 1, 1, 0], np.float32)
+    # predicted match (d < 0.5): T F T F F T; true match (y = 0): T T F F F T → 4 of 6 agree
+    assert accuracy(d, y) == pytest.approx(4 / 6)
+    assert accuracy(d, y, threshold=0.95) == pytest.approx(3 / 6)
+
+
+def test_rank_auc_by_hand_and_against_scikit_learn() -> None:
+    # positives 0.9, 0.8 against negatives 0.8, 0.1: 1 + 1 + ½ (tie) + 1 = 3.5 of 4
+    assert roc_auc(np.array([0.9, 0.8, 0.8, 0.1]), np.array([1, 0, 1, 0])) == 0.875
+    assert roc_auc(np.array([1.0, 2.0]), np.array([1, 0])) == 0.0
+    assert np.isnan(roc_auc(np.array([1.0, 2.0]), np.array([1, 1])))
+    rng = np.random.default_rng(0)
+    score = rng.integers(0, 20, 500).astype(float)  # many ties
+    positive = rng.random(500) < 0.4
+    from sklearn.metrics import roc_auc_score
+
+    assert roc_auc(score, positive) == pytest.approx(roc_auc_score(positive, score), abs=1e-12)
+    assert auc(score, positive) == pytest.approx(roc_auc(score, positive), abs=1e-12)
+
+
+def test_evaluate_on_fixed_distances_matches_a_hand_count(
+        run: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every state at a chosen distance from every text: the report must count exactly."""
+    config = json.loads((run / "config.json").read_text())
+    pairs = PairSet(config["data"])
+    rng = np.random.default_rng(1)
+    chosen = {s: rng.random(int(pairs.pairs(s).state.max()) + 1) for s in ("train", "val", "test")}
+    monkeypatch.setattr(ev, "_embed_split", lambda scorer, data, split: np.pad(
+        chosen[split][:, None], ((0, 0), (0, 255))).astype(np.float32))
+    monkeypatch.setattr(ev.MEMScorer, "embed_texts",
+                        lambda self, texts: np.zeros((len(texts), 256), np.float32))
+    report = evaluate(run, device="cpu")
+    for split in ("train", "val", "test"):
+        p = pairs.pairs(split)
+        d = chosen[split][p.state]
+        hand = sum((di < 0.5) == (yi == 0) for di, yi in zip(d, p.target)) / len(p)
+        assert report["splits"][split]["accuracy"] == pytest.approx(hand)
+        m = p.kind == "null"
+        assert report["splits"][split]["per_kind"]["null"]["accuracy"] == pytest.approx(
+            np.mean(d[m] >= 0.5))
+        # retrieval: every command is at the state's distance, so argmin is the first command
+        states, first = np.unique(p.state, return_index=True)
+        truth = np.where(p.label[first] == "", "none", p.label[first])
+        first_id = pairs.commands[0]["id"]
+        pred = np.where(chosen[split][states] < 0.5, first_id, "none")
+        assert report["splits"][split]["retrieval"]["accuracy"] == pytest.approx(
+            np.mean(pred == truth))
+
+
+def test_report_of_a_real_run(run: Path) -> None:
+    report = evaluate(run, device="cpu")
+    assert json.loads((run / "eval.json").read_text())["splits"]["test"]["pairs"] == \
+        report["splits"]["test"]["pairs"]
+    config = json.loads((run / "config.json").read_text())
+    data = PairSet(config["data"])
+    test = report["splits"]["test"]
+    p = data.pairs("test")
+    assert sum(v["pairs"] for v in test["per_kind"].values()) == len(p)
+    assert set(test["per_command"]) == {c["id"] for c in data.commands}
+    # the accuracy equals the one recomputed through load_model, pair by pair
+    scorer = load_model(run)
+    with data.packed("test") as packed:
+        stacks = packed.read(0, len(packed))
+    d = scorer.distance({k: v[p.state] for k, v in stacks.arrays.items()}, list(p.command))
+    assert test["accuracy"] == pytest.approx(accuracy(d, p.target))
+    assert test["retrieval"]["states"] == len(np.unique(p.state))
+    para = test["paraphrases"]["per_paraphrase"]
+    assert set(para) == {t for c in data.commands for t in c["paraphrases"]}
+    assert report["same_data_as_training"]
+
+
+def test_cli_evaluate_prints_the_table_beside_the_papers(run: Path,
+                                                         capsys: pytest.CaptureFixture[str]
+                                                         ) -> None:
+    code, out, err = run_cli(["evaluate", str(run), "--device", "cpu"], capsys)
+    assert code == 0, err
+    lines = out.splitlines()
+    assert lines[0].split()[:4] == ["split", "pairs", "accuracy", "%"]
+    assert "95.61" in lines[1] and "82.35" in lines[2] and "80.40" in lines[3]
+    assert "test paraphrases" in out and f"wrote {run / 'eval.json'}" in out
+
+
+def test_cli_tsne_writes_a_png(run: Path, tmp_path: Path,
+                               capsys: pytest.CaptureFixture[str]) -> None:
+    png = tmp_path / "map.png"
+    code, out, err = run_cli(["tsne", str(run), "--out", str(png), "--states", "60",
+                              "--text", "make a depot now", "--device", "cpu"], capsys)
+    assert code == 0, err
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 20_000
+    code, _, err = run_cli(["tsne", str(run), "--out", str(png), "--text", "qqzx vvkw"], capsys)
+    assert_one_line_error(code, err, "'qqzx vvkw'", "no word")
+
+
+def test_cli_errors_for_missing_run_foreign_schema_and_bad_data(
+        run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code, _, err = run_cli(["evaluate", str(tmp_path / "nope")], capsys)
+    assert_one_line_error(code, err, "run folder", "does not exist")
+    (tmp_path / "empty").mkdir()
+    code, _, err = run_cli(["evaluate", str(tmp_path / "empty")], capsys)
+    assert_one_line_error(code, err, "best.pt", "does not exist")
+    import shutil
+
+    other = tmp_path / "other"
+    shutil.copytree(run, other)
+    blob = torch.load(other / "best.pt", weights_only=True)
+    blob["schema"]["version"] = 99
+    torch.save(blob, other / "best.pt")
+    code, _, err = run_cli(["evaluate", str(other)], capsys)
+    assert_one_line_error(code, err, "schema version 99")
+    code, _, err = run_cli(["evaluate", str(run), "--data", str(tmp_path)], capsys)
+    assert_one_line_error(code, err, "pairset.json")

@@ -1,0 +1,191 @@
+"""The MEM: inputs derived from the schema, encodings, the penalty, checkpoints, the scorer."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from tests.mem_helpers import SMALL_SCHEMA  # noqa: E402
+
+from sc2data import load_model  # noqa: E402
+from sc2data._pysc2 import units  # noqa: E402
+from sc2data.errors import Sc2DataError  # noqa: E402
+from sc2data.model.mem import (MEM, ModelConfig, load_checkpoint, save_checkpoint,  # noqa: E402
+                           to_tensors, value_tables)
+from sc2data.model.reward import MEMScorer  # noqa: E402
+from sc2data.schema import Schema  # noqa: E402
+from sc2data.testing.synthetic_pairs import stacks  # noqa: E402
+
+VECTORS = np.random.default_rng(0).normal(size=(4, 5)).astype(np.float32)
+WORDS = ("build", "a", "supply", "depot")
+EVENTS = ["build_supply_depot", "build_barracks", "build_scv", "train_marine",
+          "collect_minerals", None]
+
+
+def _model(schema: Schema, mode: str = "embed", seed: int = 0, pool: int = 2
+           ) -> tuple[MEM, object]:
+    batch = stacks(schema, EVENTS, seed=seed)
+    cfg = ModelConfig(categorical=mode, pool=pool)  # type: ignore[arg-type]
+    torch.manual_seed(seed)
+    return MEM(schema, value_tables(schema, [batch], cfg.max_table), VECTORS, cfg), batch
+
+
+def test_unit_type_table_holds_the_ids_seen_and_small_layers_every_id() -> None:
+    batch = stacks(SMALL_SCHEMA, EVENTS, seed=0)
+    tables = value_tables(SMALL_SCHEMA, [batch], max_table=32)
+    assert tables["screen/player_relative"] == [0, 1, 2, 3, 4]  # scale 5: every id
+    assert tables["minimap/camera"] == [0, 1]
+    assert set(tables["screen/unit_type"]) == {0, units.Terran.SCV, units.Terran.CommandCenter,
+                                               units.Terran.SupplyDepot, units.Terran.Barracks,
+                                               units.Terran.Marine, units.Neutral.MineralField}
+
+
+@pytest.mark.parametrize("mode, screen, minimap", [
+    # screen: unit_type 7 ids + "other" = 8, player_relative 5, hit points 1 scalar; ×2 frames
+    ("onehot", 2 * (8 + 5 + 1), 2 * (5 + 2)),
+    ("embed", 2 * (8 + 5 + 1), 2 * (5 + 2)),  # the one-hot image; embedded in the first conv
+    ("scalar", 2 * (1 + 1 + 1), 2 * (1 + 1)),
+])
+def test_input_channels_follow_the_schema(mode: str, screen: int, minimap: int) -> None:
+    m, _ = _model(SMALL_SCHEMA, mode)
+    assert m.state.inputs["screen"].channels == screen
+    assert m.state.inputs["minimap"].channels == minimap
+    paper, _ = _model(Schema.paper(), mode)
+    assert paper.state.inputs["screen"].channels > screen  # 13 layers, not 3
+
+
+def test_embed_equals_a_per_layer_lookup_then_the_convolution() -> None:
+    from torch.nn import functional as F
+
+    from sc2data.model.mem import EmbeddedConv
+
+    m, batch = _model(SMALL_SCHEMA, "embed", pool=1)
+    inp = m.state.inputs["screen"]
+    first = m.state.towers["screen"][0]
+    assert isinstance(first, EmbeddedConv)
+    x = to_tensors(m.state.pack(batch.arrays))
+    with torch.no_grad():
+        onehot = inp(x["screen.idx"], x["screen.scalar"])  # (B, C, H, W)
+        embedded = torch.einsum("bchw,cd->bdhw", onehot, first.mixing())
+        # at a pixel, the embedded image holds the layer's embedding row of the pixel's id
+        ut, table = batch.layer("screen/unit_type"), m.tables["screen/unit_type"]
+        per_frame = embedded.shape[1] // 2
+        for frame in (0, 1):
+            compact = table.index(int(ut[0, frame, 20, 20])) + 1  # +1: index 0 is "other"
+            got = embedded[0, frame * per_frame + 1: frame * per_frame + 1 + 8, 20, 20]
+            torch.testing.assert_close(got, first.embeds[0][compact])  # after 1 scalar layer
+        hp = batch.layer("screen/unit_hit_points")[0, 1, 20, 20] / 1600
+        assert float(embedded[0, per_frame, 20, 20]) == pytest.approx(hp)
+        # and folding E into the kernel is the same function as embedding first
+        explicit = F.conv2d(embedded, first.conv.weight, first.conv.bias, first.conv.stride)
+        torch.testing.assert_close(first(onehot), explicit, rtol=1e-4, atol=1e-5)
+
+
+def test_pooled_onehot_holds_each_ids_share_of_the_cell() -> None:
+    m, batch = _model(SMALL_SCHEMA, "onehot", pool=2)
+    inp = m.state.inputs["screen"]
+    x = to_tensors(m.state.pack(batch.arrays))
+    with torch.no_grad():
+        img = inp(x["screen.idx"], x["screen.scalar"])
+    assert img.shape[-2:] == (32, 32)
+    ut = batch.layer("screen/unit_type")
+    table = m.tables["screen/unit_type"]
+    per_frame, n_scalar = img.shape[1] // 2, 1
+    for frame in (0, 1):
+        block = img[:, frame * per_frame + n_scalar: frame * per_frame + n_scalar + 8]
+        for unit in (units.Terran.SCV, units.Terran.SupplyDepot):
+            share = block[:, table.index(unit) + 1].sum((1, 2)).numpy()
+            np.testing.assert_allclose(share * 4, (ut[:, frame] == unit).sum((1, 2)))
+    hp = batch.layer("screen/unit_hit_points")[:, 0].reshape(6, 32, 2, 32, 2).mean((2, 4))
+    np.testing.assert_allclose(img[:, 0].numpy(), hp / 1600, rtol=1e-5)
+
+
+def test_nonspatial_features_are_signed_log1p_of_both_frames_and_change() -> None:
+    m, batch = _model(SMALL_SCHEMA)
+    seen: list[torch.Tensor] = []
+    m.state.nonspatial[0].register_forward_hook(lambda mod, inp, out: seen.append(inp[0]))
+    with torch.no_grad():
+        m.state(to_tensors(m.state.pack(batch.arrays)))
+    v = seen[0].numpy()
+    player = batch.arrays["player"].astype(float)
+    n, width = player.shape[-1], v.shape[1] // 3  # player (11) then score_cumulative (13)
+    np.testing.assert_allclose(v[:, :n], np.log1p(player[:, 0]), rtol=1e-6)
+    delta = player[:, 1] - player[:, 0]
+    np.testing.assert_allclose(v[:, 2 * width:2 * width + n],
+                               np.sign(delta) * np.log1p(np.abs(delta)), rtol=1e-6)
+
+
+@pytest.mark.parametrize("pool", [1, 2])
+def test_torch_packing_for_a_gpu_equals_numpy_packing(pool: int) -> None:
+    m, batch = _model(Schema.paper(), "onehot", pool=pool)
+    cpu = m.state.pack(batch.arrays)
+    raw = to_tensors({k: batch.arrays[k] for k in m.state.keys()})
+    dev = m.state.pack_torch(raw)
+    assert set(cpu) == set(dev)
+    for k in cpu:
+        np.testing.assert_array_equal(dev[k].numpy(), cpu[k], err_msg=k)
+
+
+def test_forward_gives_one_distance_per_pair_and_l2_skips_biases_and_words() -> None:
+    m, batch = _model(SMALL_SCHEMA)
+    x = to_tensors(m.state.pack(batch.arrays))
+    ids, lengths = torch.tensor([[1, 2, 3, 4], [1, 0, 0, 0]]), torch.tensor([4, 1])
+    d = m(x, ids, lengths, torch.tensor([0, 1, 0, 1, 0, 1]))
+    assert d.shape == (6,) and torch.isfinite(d).all() and (d >= 0).all()
+    expected = sum((p ** 2).sum() for n, p in m.named_parameters()
+                   if "bias" not in n and n != "command.words.weight")
+    torch.testing.assert_close(m.l2(), expected)
+    assert not m.command.words.weight.requires_grad
+
+
+def test_checkpoint_reloads_to_identical_distances(tmp_path: Path) -> None:
+    m, batch = _model(SMALL_SCHEMA, "onehot")
+    save_checkpoint(tmp_path / "best.pt", m, WORDS, {"commands": []})
+    texts = ["build a supply depot", "depot"]
+    m.eval()
+    before = MEMScorer(m, {"words": WORDS}, torch.device("cpu")).distances(batch, texts)
+    np.testing.assert_array_equal(load_model(tmp_path).distances(batch, texts), before)
+    x = to_tensors(m.state.pack(batch.arrays))
+    ids = torch.tensor([[1, 2, 3, 4], [4, 0, 0, 0]])
+    with torch.no_grad():
+        d0 = m(x, ids, torch.tensor([4, 1]), torch.zeros(6, dtype=torch.long))
+    np.testing.assert_allclose(before[:, 0], d0.numpy(), rtol=1e-6)
+    again, _ = load_checkpoint(tmp_path / "best.pt")
+    with torch.no_grad():
+        np.testing.assert_array_equal(again(x, ids, torch.tensor([4, 1]),
+                                            torch.zeros(6, dtype=torch.long)).numpy(), d0.numpy())
+
+
+def test_scorer_batches_broadcasts_and_refuses_bad_input(tmp_path: Path) -> None:
+    m, batch = _model(SMALL_SCHEMA)
+    save_checkpoint(tmp_path / "best.pt", m, WORDS, {})
+    s = load_model(tmp_path / "best.pt")
+    one = s.distance(batch, "build a depot")
+    each = s.distance(batch, ["build a depot"] * len(batch))
+    np.testing.assert_allclose(one, each, rtol=1e-6)
+    np.testing.assert_allclose(s.distances(batch, ["build a depot", "a"])[:, 0], one, rtol=1e-6)
+    assert s.matches(batch, "build a depot").dtype == bool
+    with pytest.raises(Sc2DataError, match="stacks and 2 texts"):
+        s.distance(batch, ["a", "depot"])
+    with pytest.raises(Sc2DataError, match="no word in the model's vocabulary"):
+        s.distance(batch, "qqzx")
+    partial = {k: v for k, v in batch.arrays.items() if k != "screen/unit_type"}
+    with pytest.raises(Sc2DataError, match="screen/unit_type"):
+        s.distance(partial, "depot")
+
+
+def test_checkpoint_of_another_schema_version_is_refused(tmp_path: Path) -> None:
+    m, _ = _model(SMALL_SCHEMA)
+    save_checkpoint(tmp_path / "best.pt", m, WORDS, {})
+    blob = torch.load(tmp_path / "best.pt", weights_only=True)
+    blob["schema"]["version"] = 99
+    torch.save(blob, tmp_path / "best.pt")
+    with pytest.raises(Sc2DataError, match="schema version 99"):
+        load_model(tmp_path)
+    (tmp_path / "best.pt").write_bytes(b"not a checkpoint")
+    with pytest.raises(Sc2DataError, match="not a readable checkpoint"):
+        load_model(tmp_path)

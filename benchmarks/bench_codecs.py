@@ -25,13 +25,13 @@ import h5py
 import hdf5plugin
 import numpy as np
 
-from sc2data.game.agents import make_agent, play
 from sc2data.data.chunks import Codec
 from sc2data.data.dataset import open_dataset, write_index, write_manifest
-from sc2data.game.env import make_env
 from sc2data.data.rollout import RolloutConfig, index_rows, manifest_for
-from sc2data.schema import Schema
 from sc2data.data.shards import ShardWriter
+from sc2data.game.agents import make_agent, play
+from sc2data.game.env import make_env
+from sc2data.schema import Schema
 
 FILTERS: dict[str, dict[str, Any]] = {
     "gzip-1": {"compression": "gzip", "compression_opts": 1},

@@ -47,7 +47,9 @@ def _run(env: Any, agent: Any, steps: int) -> float:
 
 
 def _agent(workload: str, seed: int) -> Any:
-    from sc2data.game.agents import make_agent  # imports pysc2 through sc2data._pysc2 first
+    from sc2data.game.agents import (
+        make_agent,  # imports pysc2 through sc2data._pysc2 first
+    )
     from pysc2.agents import base_agent  # isort: skip
 
     return base_agent.BaseAgent() if workload == WORKLOADS[0] else make_agent(workload, seed=seed)

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sc2data.labels.label import label_batches
+from sc2data.labels.apply import label_batches
 from sc2data.labels.registry import load_registry
 from sc2data.schema import Schema, StackBatch
 
@@ -98,7 +98,8 @@ def rate(stacks: int, walls: list[float], cpus: list[float]) -> str:
 
 
 def end_to_end(data: Path, batch_size: int, repeats: int) -> None:
-    from sc2data.labels.label import LABELS_FILE, STACKS_FILE, label_dataset
+    from sc2data.labels.label import label_dataset
+    from sc2data.labels.store import LABELS_FILE, STACKS_FILE
 
     walls, cpus = [], []
     for _ in range(repeats):

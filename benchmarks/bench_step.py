@@ -23,14 +23,14 @@ from typing import Any
 
 import numpy as np
 
-from sc2data.game.agents import make_agent
 from sc2data.data.chunks import ChunkEncoder
 from sc2data.data.dataset import keep_freed_memory
-from sc2data.game.env import make_env
 from sc2data.data.rollout import RolloutConfig, episode_seeds, shard_attrs
+from sc2data.data.shards import ShardWriter
+from sc2data.game.agents import make_agent
+from sc2data.game.env import make_env
 from sc2data.game.sim import env as sim_env
 from sc2data.game.sim import observe
-from sc2data.data.shards import ShardWriter
 
 TOTALS: dict[str, float] = defaultdict(float)
 

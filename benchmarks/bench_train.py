@@ -61,8 +61,8 @@ def training(data: Path, device: str, threads: int | None, amp: bool, pool: int,
              categorical: str, epochs: int) -> tuple[float, float, float]:
     """(train pairs/s, train pairs per CPU-second, validation pairs/s) of ``sc2data train``,
     epochs after the first."""
-    from sc2data.pairs.loader import PairSet
     from sc2data.model.train import TrainConfig, train
+    from sc2data.pairs.loader import PairSet
 
     with tempfile.TemporaryDirectory() as out:
         run = train(TrainConfig(data=str(data), out=out, epochs=epochs, device=device,

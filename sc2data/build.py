@@ -47,9 +47,9 @@ def build(recipe: Recipe, out: str | os.PathLike[str], *, workers: int = 1,
     ``ray`` (:class:`sc2data.scaleout.driver.RayOptions`): roll out and label as Ray tasks, on one Ray
     instance or cluster for both stages; the data is the same either way.
     """
+    from sc2data.data.rollout import RolloutConfig, check_folder, rollout
     from sc2data.labels.label import label_dataset
     from sc2data.pairs.pairset import make_pairset
-    from sc2data.data.rollout import RolloutConfig, check_folder, rollout
 
     out = Path(out)
     report = BuildReport(out)

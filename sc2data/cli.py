@@ -179,9 +179,9 @@ def rollout(
     ray_memory: Optional[int] = _ray_memory(),
 ) -> None:
     """Play episodes and store every 2-frame stack in sharded, checksummed HDF5."""
-    from sc2data.errors import Sc2DataError
     from sc2data.data.rollout import RolloutConfig
     from sc2data.data.rollout import rollout as run
+    from sc2data.errors import Sc2DataError
 
     given = {k: v for k, v in {"env": env, "agent": agent, "episodes": episodes, "seed": seed,
                                "layers": layers}.items() if v is not None}
@@ -246,7 +246,8 @@ def build(
     ray_memory: Optional[int] = _ray_memory(),
 ) -> None:
     """Run a recipe end to end: rollout → label → pair, resuming whatever is already done."""
-    from sc2data.build import PAIRS_DIR, build as run
+    from sc2data.build import PAIRS_DIR
+    from sc2data.build import build as run
     from sc2data.recipe import load
 
     r = load(recipe)

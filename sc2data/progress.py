@@ -3,7 +3,22 @@
 from __future__ import annotations
 
 import sys
-from typing import Any, TextIO
+from typing import Any, Protocol, TextIO
+
+
+class Bar(Protocol):
+    """What sc2data's stages use of a progress bar (a tqdm bar; tqdm itself loads lazily)."""
+
+    n: float
+    total: float | None
+
+    def update(self, n: float = 1) -> bool | None: ...
+
+    def refresh(self) -> None: ...
+
+    def __enter__(self) -> Any: ...
+
+    def __exit__(self, *exc: object) -> None: ...
 
 LOG_EVERY_S = 60.0
 """With stderr redirected to a file, a progress line every this many seconds, and none at all
@@ -25,7 +40,7 @@ class _Lines:
         self.stream.flush()
 
 
-def bar(total: int, *, desc: str, unit: str, show: bool | None) -> Any:
+def bar(total: int, *, desc: str, unit: str, show: bool | None) -> Bar:
     """A tqdm progress bar over ``total`` units.
 
     ``show``: True, a live bar; False, none; None, a live bar when stderr is a terminal and, when

@@ -38,9 +38,14 @@ from pathlib import Path
 from typing import Any
 
 from sc2data.errors import Sc2DataError
-from sc2data.vocab import (BACKENDS, LAYER_SETS, MISMATCH_METHODS, SPLIT_METHODS, SPLITS,
-                            STEP_MUL)
-
+from sc2data.vocab import (
+    BACKENDS,
+    LAYER_SETS,
+    MISMATCH_METHODS,
+    SPLIT_METHODS,
+    SPLITS,
+    STEP_MUL,
+)
 
 
 class RecipeError(Sc2DataError):

@@ -11,19 +11,17 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
-import fcntl
 import multiprocessing as mp
 import os
 import queue
 import signal
 import threading
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from sc2data.data.dataset import PARTIAL
 from sc2data.errors import Sc2DataError
+from sc2data.files import PARTIAL, FolderLock
 
 Report = Callable[[int], None]
 """Called by a job with the number of steps played since its last call."""
@@ -31,54 +29,13 @@ Job = Callable[[int, Report], Any]
 """Writes one shard: ``job(shard index, report)``, returning a picklable result; must itself be
 picklable (spawned workers)."""
 
-LOCK = ".lock"
-_LOCK_WAIT_S = 10.0
-
-
-class FolderLock:
-    """``flock`` on ``out/.lock``. A run holds it exclusively while it prepares the folder, then
-    shared, as its workers do; a second run waits for every process of the first (orphaned
-    workers of a killed run included) and refuses to write the folder alongside it."""
-
-    def __init__(self, out: Path, exclusive: bool) -> None:
-        self.out = out
-        self._fd = os.open(out / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
-        try:
-            self._take(fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH)
-        except BaseException:
-            os.close(self._fd)
-            raise
-
-    def _take(self, mode: int) -> None:
-        deadline = time.monotonic() + _LOCK_WAIT_S
-        while True:
-            try:
-                fcntl.flock(self._fd, mode | fcntl.LOCK_NB)
-                return
-            except BlockingIOError:
-                if time.monotonic() > deadline:
-                    raise Sc2DataError(f"another sc2data rollout is writing to {self.out}; wait "
-                                       f"for it to finish or stop it") from None
-                time.sleep(0.05)
-
-    def share(self) -> None:
-        """Downgrade to a shared lock, so that this run's workers can take theirs."""
-        fcntl.flock(self._fd, fcntl.LOCK_SH)
-
-    def __enter__(self) -> FolderLock:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        os.close(self._fd)
-
-
 def _die_with_parent() -> None:
     """Linux: have the kernel kill this worker when its parent dies (e.g. ``kill -9``)."""
     with contextlib.suppress(OSError, AttributeError):
         ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
 
 
-def _worker(tasks: Any, results: Any, job: Job, out: Path, parent: int) -> None:
+def _worker(tasks: Any, results: Any, job: Job, out: Path, what: str, parent: int) -> None:
     """A worker process: write shards from ``tasks`` until it gets ``None``."""
     _die_with_parent()
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and stops us
@@ -90,7 +47,7 @@ def _worker(tasks: Any, results: Any, job: Job, out: Path, parent: int) -> None:
             os._exit(1)
         results.put(("steps", n))
 
-    with FolderLock(out, exclusive=False):
+    with FolderLock(out, what, exclusive=False):
         while (i := tasks.get()) is not None:
             try:
                 result = job(i, report)
@@ -114,7 +71,7 @@ def run_parallel(job: Job, todo: list[int], workers: int, out: Path, on_steps: R
     n = min(workers, len(todo))
     for _ in range(n):
         tasks.put(None)
-    procs = [ctx.Process(target=_worker, args=(tasks, results, job, out, os.getpid()),
+    procs = [ctx.Process(target=_worker, args=(tasks, results, job, out, what, os.getpid()),
                          daemon=True) for _ in range(n)]
     # Workers inherit an ignored SIGINT, so that a Ctrl-C while they import cannot hit them:
     # the parent alone handles it, and stops them.

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-
 from sc2data.schema import Schema
 
 SMALL_SCHEMA = Schema.from_names(["unit_type", "player_relative", "unit_hit_points"],

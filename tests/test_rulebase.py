@@ -5,9 +5,25 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sc2data.rulebase import (RULE_ID, FunctionRule, Rule, appeared_pixels, blank_frame, change,
-                              count_true, fell, is_schema_key, paint_disk, pixel_count, rose, rule,
-                              schema_for, set_field, stack, synthetic_batch)
+from sc2data.rulebase import (
+    RULE_ID,
+    FunctionRule,
+    Rule,
+    appeared_pixels,
+    blank_frame,
+    change,
+    count_true,
+    fell,
+    is_schema_key,
+    paint_disk,
+    pixel_count,
+    rose,
+    rule,
+    schema_for,
+    set_field,
+    stack,
+    synthetic_batch,
+)
 from sc2data.schema import MissingLayerError, Schema, StackBatch
 
 

@@ -17,10 +17,17 @@ import h5py
 import numpy as np
 
 from sc2data._pysc2 import actions
-from sc2data.data.dataset import INDEX, MANIFEST, PARTIAL, manifest_schema, read_index, read_manifest
+from sc2data.data.dataset import (
+    INDEX,
+    MANIFEST,
+    manifest_schema,
+    read_index,
+    read_manifest,
+)
+from sc2data.data.shards import CHUNK_INDEX, EPISODE_COLUMNS, Shard, chunk_table
 from sc2data.errors import Sc2DataError
+from sc2data.files import PARTIAL, sha256_file
 from sc2data.schema import Block
-from sc2data.data.shards import CHUNK_INDEX, EPISODE_COLUMNS, Shard, chunk_table, sha256_file
 
 _BLOCK = 1024
 """Frames read per call while verifying."""

@@ -25,16 +25,14 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from sc2data.data.chunks import ChunkDecoder, Codec
+from sc2data.data.shards import Shard
 from sc2data.errors import Sc2DataError
+from sc2data.files import write_atomic
+from sc2data.formats import DATASET
 from sc2data.schema import Block, Schema, SchemaError, StackBatch
-from sc2data.data.shards import Shard, fsync_path
 
-DATASET_FORMAT = "sc2data-dataset"
-DATASET_FORMAT_VERSION = 2
-"""2: shards of format 2 (frames in blocks of keys)."""
 MANIFEST = "dataset.json"
 INDEX = "index.parquet"
-PARTIAL = ".partial"
 INDEX_SCHEMA = pa.schema([
     ("shard", pa.string()), ("episode", pa.int64()), ("n_steps", pa.int64()),
     ("frame_start", pa.int64()), ("step_start", pa.int64()), ("env_seed", pa.int64()),
@@ -46,21 +44,6 @@ INDEX_SCHEMA = pa.schema([
 
 def shard_name(i: int) -> str:
     return f"shard-{i:05d}.h5"
-
-
-def write_atomic(path: Path, data: bytes) -> None:
-    """Write ``path`` so that it is either absent, old, or complete: temp file, fsync, rename."""
-    tmp = path.with_name(path.name + PARTIAL)
-    try:
-        with open(tmp, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    fsync_path(path.parent)
 
 
 def write_manifest(folder: Path, manifest: dict[str, Any]) -> None:
@@ -87,11 +70,7 @@ def read_manifest(folder: Path) -> dict[str, Any]:
         manifest = json.loads(path.read_text())
     except (OSError, ValueError) as e:
         raise Sc2DataError(f"{path} is unreadable ({e}); delete the folder and roll out again")
-    if not isinstance(manifest, dict) or manifest.get("format") != DATASET_FORMAT:
-        raise Sc2DataError(f"{path} is not an sc2data dataset manifest")
-    if manifest.get("format_version") != DATASET_FORMAT_VERSION:
-        raise Sc2DataError(f"{path} has dataset format {manifest.get('format_version')}, not "
-                           f"{DATASET_FORMAT_VERSION}; regenerate it with this sc2data")
+    DATASET.check(manifest, path)
     return manifest
 
 

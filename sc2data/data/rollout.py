@@ -23,19 +23,26 @@ from typing import Any
 
 import numpy as np
 
-from sc2data.game import env as envs
 from sc2data.data.chunks import Codec
-from sc2data.data.dataset import (DATASET_FORMAT, DATASET_FORMAT_VERSION, MANIFEST, PARTIAL,
-                             keep_freed_memory, read_manifest, shard_name, write_index,
-                             write_manifest)
+from sc2data.data.dataset import (
+    MANIFEST,
+    keep_freed_memory,
+    read_manifest,
+    shard_name,
+    write_index,
+    write_manifest,
+)
+from sc2data.data.shards import Shard, ShardWriter
 from sc2data.errors import Sc2DataError
+from sc2data.files import LOCK, PARTIAL, FolderLock, publish, sha256_file
+from sc2data.formats import DATASET
+from sc2data.game import env as envs
 from sc2data.progress import bar as progress_bar
 from sc2data.provenance import versions
 from sc2data.recipe import Recipe, RolloutSpec
 from sc2data.schema import Schema
 from sc2data.vocab import BACKENDS, EPISODE_STEPS, LAYER_SETS, MAP_NAME
-from sc2data.data.shards import Shard, ShardWriter, fsync_path, sha256_file
-from sc2data.workers import LOCK, FolderLock, run_parallel
+from sc2data.workers import run_parallel
 
 EnvFactory = Callable[[int], Any]
 """``seed -> environment.Base`` (a pysc2 environment) for one episode."""
@@ -213,14 +220,13 @@ def write_shard(config: RolloutConfig, out: Path, env_factory: EnvFactory,
         partial.unlink(missing_ok=True)
         raise
     rows = index_rows(partial, final.name)
-    os.replace(partial, final)
-    fsync_path(out)
+    publish(partial, final)
     return rows
 
 
 # -- the folder ---------------------------------------------------------------------------------
 def manifest_for(config: RolloutConfig) -> dict[str, Any]:
-    return {"format": DATASET_FORMAT, "format_version": DATASET_FORMAT_VERSION,
+    return {**DATASET.header(),
             "settings": config.settings(), "schema": config.schema.to_dict(),
             "versions": versions(), "map": MAP_NAME, "n_shards": config.n_shards}
 
@@ -344,7 +350,7 @@ def rollout(config: RolloutConfig, out: str | os.PathLike[str], workers: int = 1
         if made:
             shutil.rmtree(out, ignore_errors=True)
         raise
-    with FolderLock(out, exclusive=True) as lock:
+    with FolderLock(out, "rollout") as lock:
         todo = prepare_folder(config, out)
         lock.share()
         per_episode = config.max_steps or EPISODE_STEPS

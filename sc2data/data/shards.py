@@ -25,7 +25,6 @@ its settings and seeds alone.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 from collections.abc import Mapping, Sequence
@@ -36,12 +35,18 @@ import h5py
 import numpy as np
 
 from sc2data._pysc2 import actions
-from sc2data.data.chunks import ChecksumError, ChunkDecoder, ChunkEncoder, Codec, fast_path_ok
+from sc2data.data.chunks import (
+    ChecksumError,
+    ChunkDecoder,
+    ChunkEncoder,
+    Codec,
+    fast_path_ok,
+)
 from sc2data.errors import Sc2DataError
+from sc2data.files import fsync_path
+from sc2data.formats import SHARD
 from sc2data.schema import Schema, SchemaError
 
-FORMAT = "sc2data-shard"
-FORMAT_VERSION = 2
 """2: frames stored in blocks of keys (1 had one dataset per key)."""
 ARG_WIDTH = max(sum(len(a.sizes) for a in f.args) for f in actions.FUNCTIONS)
 """Widest flattened argument list of any pysc2 function (select_rect: add, x0, y0, x1, y1)."""
@@ -87,25 +92,8 @@ def function_call(function: int, flat: np.ndarray) -> actions.FunctionCall:
     return actions.FunctionCall(int(function), args)
 
 
-def fsync_path(path: Path) -> None:
-    """Flush a file (or a folder's entries) to disk."""
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
 class ObservationError(Sc2DataError, ValueError):
     """An observation the schema cannot store losslessly (a value its layer's dtype cannot hold)."""
-
-
-def sha256_file(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 class ShardWriter:
@@ -121,7 +109,7 @@ class ShardWriter:
         self.schema = schema
         self.codec = codec
         self._file = h5py.File(self.path, "w", libver="latest")
-        header = {"format": FORMAT, "format_version": FORMAT_VERSION, "schema": schema.to_dict(),
+        header = {**SHARD.header(), "schema": schema.to_dict(),
                   "schema_version": schema.version, "codec": codec.to_dict()}
         for k, v in {**header, **attrs}.items():
             # Integers stay integers for any HDF5 tool; everything else is JSON, unambiguously.
@@ -382,12 +370,7 @@ class Shard:
                                f"it is truncated or not an sc2data shard") from None
         try:
             self.attrs: dict[str, Any] = {k: _attr(v) for k, v in self.file.attrs.items()}
-            if self.attrs.get("format") != FORMAT:
-                raise Sc2DataError(f"{self.path} is not an sc2data shard")
-            if self.attrs.get("format_version") != FORMAT_VERSION:
-                raise Sc2DataError(f"{self.path} has shard format "
-                                   f"{self.attrs.get('format_version')}, not {FORMAT_VERSION}; "
-                                   f"regenerate it with this sc2data")
+            SHARD.check(self.attrs, self.path)
             try:
                 self.schema = Schema.from_dict(self.attrs["schema"])
             except SchemaError as e:
@@ -460,5 +443,4 @@ def _first_line(e: BaseException) -> str:
 
 
 __all__ = ["ARG_WIDTH", "CHUNK_INDEX", "ChecksumError", "FrameSource", "ObservationError",
-           "Shard", "ShardWriter", "chunk_table", "flatten_args", "function_call", "fsync_path",
-           "sha256_file"]
+           "Shard", "ShardWriter", "chunk_table", "flatten_args", "function_call"]

@@ -8,7 +8,7 @@ from typing import Any, Literal
 
 from sc2data._pysc2 import environment, interface_format, sc2_env
 from sc2data.errors import Sc2DataError
-from sc2data.vocab import BACKENDS, EPISODE_STEPS, MAP_NAME, STEP_MUL
+from sc2data.vocab import BACKENDS, MAP_NAME, STEP_MUL
 
 Backend = Literal["sim", "sc2"]
 

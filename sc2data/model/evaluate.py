@@ -24,9 +24,9 @@ from typing import Any
 import numpy as np
 
 from sc2data.errors import Sc2DataError
+from sc2data.model.reward import MEMScorer, load_model, pairwise
 from sc2data.pairs.loader import PairSet
 from sc2data.vocab import SPLITS
-from sc2data.model.reward import MEMScorer, load_model, pairwise
 
 PAPER = {"train": 0.9561, "val": 0.8235, "test": 0.8040}
 """The paper's accuracies (Waytowich et al. 2019, §4)."""

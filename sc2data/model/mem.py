@@ -40,6 +40,8 @@ from typing import Any, Literal
 import numpy as np
 
 from sc2data.errors import MissingDependencyError, Sc2DataError
+from sc2data.files import atomic_file
+from sc2data.formats import CHECKPOINT
 from sc2data.schema import Schema, SchemaError, StackBatch
 
 try:
@@ -49,8 +51,6 @@ try:
 except ImportError as _e:  # pragma: no cover - exercised only without the extra
     raise MissingDependencyError("torch", "train", "sc2data train") from _e
 
-CHECKPOINT_FORMAT = "sc2data.mem"
-CHECKPOINT_VERSION = 1
 THRESHOLD = 0.5
 """A state and a command match when their distance is below this (the paper's 0.5)."""
 
@@ -406,14 +406,13 @@ def save_checkpoint(path: str | os.PathLike[str], model: MEM, words: tuple[str, 
                     extra: Mapping[str, Any]) -> None:
     """Write model state, schema, tables, vocabulary and ``extra`` (config, …), atomically."""
     path = Path(path)
-    blob = {"format": CHECKPOINT_FORMAT, "format_version": CHECKPOINT_VERSION,
+    blob = {**CHECKPOINT.header(),
             "schema": model.schema.to_dict(), "model_config": asdict(model.cfg),
             "tables": model.tables, "words": list(words),
             "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()},
             **extra}
-    tmp = path.with_name(path.name + ".partial")
-    torch.save(blob, tmp)
-    os.replace(tmp, path)
+    with atomic_file(path) as tmp:
+        torch.save(blob, tmp)
 
 
 def load_checkpoint(path: str | os.PathLike[str], device: str | torch.device = "cpu"
@@ -426,11 +425,7 @@ def load_checkpoint(path: str | os.PathLike[str], device: str | torch.device = "
         blob = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as e:
         raise Sc2DataError(f"{path} is not a readable checkpoint ({type(e).__name__})") from None
-    if not isinstance(blob, dict) or blob.get("format") != CHECKPOINT_FORMAT:
-        raise Sc2DataError(f"{path} is not an sc2data model checkpoint")
-    if blob.get("format_version") != CHECKPOINT_VERSION:
-        raise Sc2DataError(f"{path} has checkpoint format {blob.get('format_version')}, this "
-                           f"sc2data reads {CHECKPOINT_VERSION}; retrain the model")
+    CHECKPOINT.check(blob, path)
     try:
         schema = Schema.from_dict(blob["schema"])
     except SchemaError as e:

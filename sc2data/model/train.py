@@ -26,9 +26,9 @@ from typing import Any
 import numpy as np
 
 from sc2data.errors import MissingDependencyError, Sc2DataError
+from sc2data.model.words import load_word_vectors
 from sc2data.pairs.loader import PairLoader, PairSet
 from sc2data.provenance import versions
-from sc2data.model.words import load_word_vectors
 
 RUN_FILES = ("config.json", "metrics.jsonl", "best.pt", "eval.json", "tsne.png")
 

@@ -22,6 +22,7 @@ import numpy as np
 import pyarrow.parquet as pq
 
 from sc2data.errors import Sc2DataError
+from sc2data.formats import PAIRSET
 from sc2data.pairs.packed import BLOCK, PackedSplit
 from sc2data.schema import Schema, SchemaError
 
@@ -64,11 +65,7 @@ class PairSet:
         except (json.JSONDecodeError, UnicodeDecodeError) as e:
             raise Sc2DataError(f"{meta_path} is not valid JSON ({e}); rebuild the pair set") \
                 from None
-        if not isinstance(self.meta, dict) or self.meta.get("format") != "sc2data.pairset":
-            raise Sc2DataError(f"{meta_path} is not sc2data pair-set metadata")
-        if self.meta.get("format_version") != 1:
-            raise Sc2DataError(f"{meta_path} has pair-set format version "
-                               f"{self.meta.get('format_version')}; this sc2data reads 1")
+        PAIRSET.check(self.meta, meta_path)
         try:
             self.schema = Schema.from_dict(self.meta["schema"])
             self.commands: list[dict[str, Any]] = list(self.meta["commands"])

@@ -20,10 +20,10 @@ import hdf5plugin
 import numpy as np
 
 from sc2data.errors import Sc2DataError
+from sc2data.files import PARTIAL, publish
+from sc2data.formats import PACKED
 from sc2data.schema import Schema, SchemaError, StackBatch
 
-FORMAT = "sc2data.packed"
-FORMAT_VERSION = 1
 BLOCK = 256
 """Stacks per HDF5 chunk: the unit the trainer reads and shuffles."""
 
@@ -40,13 +40,12 @@ class PackedWriter:
     def __init__(self, path: str | os.PathLike[str], schema: Schema, n: int,
                  attrs: Mapping[str, Any] | None = None) -> None:
         self.path = Path(path)
-        self.partial = self.path.with_name(self.path.name + ".partial")
+        self.partial = self.path.with_name(self.path.name + PARTIAL)
         self.schema = schema
         self.n = n
         self.pos = 0
         self._f = h5py.File(self.partial, "w")
-        self._f.attrs["format"] = FORMAT
-        self._f.attrs["format_version"] = FORMAT_VERSION
+        self._f.attrs.update(PACKED.header())
         self._f.attrs["schema"] = json.dumps(schema.to_dict())
         for k, v in (attrs or {}).items():
             self._f.attrs[k] = v if isinstance(v, (int, float, str)) else json.dumps(v)
@@ -76,7 +75,7 @@ class PackedWriter:
             self.abort()
             raise ValueError(f"packed file {self.path}: wrote {self.pos} of {self.n} stacks")
         self._f.close()
-        os.replace(self.partial, self.path)
+        publish(self.partial, self.path)
         return self.path
 
     def abort(self) -> None:
@@ -96,12 +95,11 @@ class PackedSplit:
         except (OSError, FileNotFoundError) as e:
             raise Sc2DataError(f"{self.path} is not a readable packed split ({e}); rerun "
                                f"sc2data pair to rebuild it") from None
-        if self._f.attrs.get("format") != FORMAT:
-            raise Sc2DataError(f"{self.path} is not an sc2data packed split")
-        if self._f.attrs.get("format_version") != FORMAT_VERSION:
-            raise Sc2DataError(f"{self.path} has packed format version "
-                               f"{self._f.attrs.get('format_version')}, expected "
-                               f"{FORMAT_VERSION}; rerun sc2data pair")
+        try:
+            PACKED.check(self._f.attrs, self.path)
+        except Sc2DataError:
+            self._f.close()
+            raise
         try:
             self.schema = Schema.from_dict(json.loads(self._f.attrs["schema"]))
         except SchemaError as e:

@@ -7,7 +7,6 @@ looks finished; a folder already built from the same recipe, labels and data is 
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import shutil
@@ -22,14 +21,14 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from sc2data.errors import Sc2DataError
-from sc2data.pairs.packed import PackedWriter
+from sc2data.files import PARTIAL, fsync_path, publish, sha256_files
+from sc2data.formats import PAIRSET
 from sc2data.pairs.draw import Labelled, build_pairs
+from sc2data.pairs.packed import PackedWriter
 from sc2data.provenance import versions
 from sc2data.recipe import Recipe
 from sc2data.vocab import SPLITS
 
-FORMAT = "sc2data.pairset"
-FORMAT_VERSION = 1
 PAIRS_FILE = "pairs.parquet"
 META_FILE = "pairset.json"
 READ_BATCH = 1024
@@ -62,7 +61,7 @@ class PairsetSummary:
 
 def labelled_stacks(recipe: Recipe, data: Path) -> tuple[Labelled, dict[str, Any]]:
     """Every stack of ``data`` with the recipe's rules' verdicts, from ``sc2data label``'s files."""
-    from sc2data.labels.label import read_labels
+    from sc2data.labels.store import read_labels
 
     labels = read_labels(data)
     ids = [r["id"] for r in labels.meta["rules"]]
@@ -76,16 +75,6 @@ def labelled_stacks(recipe: Recipe, data: Path) -> tuple[Labelled, dict[str, Any
     data_labelled = Labelled(t["episode"].to_numpy().astype(np.int64),
                              t["step"].to_numpy().astype(np.int32), fires.astype(bool))
     return data_labelled, labels.meta
-
-
-def fingerprint(paths: list[Path]) -> str:
-    """sha256 over the given files' bytes, in order."""
-    h = hashlib.sha256()
-    for p in paths:
-        with open(p, "rb") as f:
-            for block in iter(lambda: f.read(1 << 20), b""):
-                h.update(block)
-    return h.hexdigest()
 
 
 def _identity(recipe: Recipe, labels_meta: dict[str, Any]) -> dict[str, Any]:
@@ -157,7 +146,7 @@ def make_pairset(recipe: Recipe, data: str | os.PathLike[str], out: str | os.Pat
                            f"choose another --out or delete it")
     pairs = build_pairs(recipe, labelled)
     ds = open_dataset(data)
-    tmp = out.with_name(f".{out.name}.partial")
+    tmp = out.with_name(f".{out.name}{PARTIAL}")
     shutil.rmtree(tmp, ignore_errors=True)
     (tmp / "packed").mkdir(parents=True)
     try:
@@ -178,7 +167,7 @@ def make_pairset(recipe: Recipe, data: str | os.PathLike[str], out: str | os.Pat
             counts[s][k] += 1
         files = [tmp / PAIRS_FILE] + [tmp / "packed" / f"{s}.h5" for s in SPLITS]
         meta = {
-            "format": FORMAT, "format_version": FORMAT_VERSION,
+            **PAIRSET.header(),
             "recipe_name": recipe.name, "seed": recipe.seed, "recipe": recipe.to_dict(),
             "schema": ds.schema.to_dict(),
             "commands": [{"id": c.id, "text": c.text, "paraphrases": list(c.paraphrases)}
@@ -190,13 +179,15 @@ def make_pairset(recipe: Recipe, data: str | os.PathLike[str], out: str | os.Pat
             "labels": {"fingerprint": labels_meta.get("fingerprint"),
                        "rules": labels_meta.get("rules")},
             "identity": identity,
-            "fingerprint": fingerprint(files),
+            "fingerprint": sha256_files(files),
             "versions": versions(),
         }
         (tmp / META_FILE).write_text(json.dumps(meta, indent=2, default=str))
+        for f in [*files, tmp / META_FILE]:
+            fsync_path(f)
         if out.exists():
             out.rmdir()  # empty (checked above)
-        os.replace(tmp, out)
+        publish(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

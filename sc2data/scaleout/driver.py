@@ -327,7 +327,8 @@ class RayShards:
 
     def __call__(self, config: Any, out: Path, todo: list[int], env_factory: Any,
                  agent_factory: Any, bar: Any) -> dict[int, list[dict[str, Any]]]:
-        from sc2data.data.dataset import PARTIAL, shard_name
+        from sc2data.data.dataset import shard_name
+        from sc2data.files import PARTIAL
         from sc2data.provenance import versions
 
         if not todo:
@@ -353,8 +354,8 @@ def rollout_on_ray(config: Any, out: str | os.PathLike[str], options: RayOptions
     Checks the settings and the folder before it starts or joins Ray; resumable as locally.
     Joining a cluster, the driver's machine needs no StarCraft II: each task checks its node.
     """
-    from sc2data.game import env as envs
     from sc2data.data.rollout import check_folder, default_env_factory, rollout
+    from sc2data.game import env as envs
 
     config.validate()
     options.validate()

@@ -90,10 +90,10 @@ def rollout_task(config: Any, out: str, i: int, env_factory: Any, agent_factory:
                   expected: dict[str, str], tracker: Any) -> dict[str, Any]:
     """One shard, written through ``write_shard`` into an attempt folder, then moved into place;
     returns its index rows (``write_shard``'s result) and the task's peak memory."""
-    from sc2data.game import env as envs
-    from sc2data.data.dataset import PARTIAL, shard_name
+    from sc2data.data.dataset import shard_name
     from sc2data.data.rollout import write_shard
-    from sc2data.data.shards import fsync_path
+    from sc2data.files import PARTIAL, fsync_path
+    from sc2data.game import env as envs
 
     def work(report: Reporter) -> None:
         _check_node(expected)
@@ -119,7 +119,7 @@ def rollout_task(config: Any, out: str, i: int, env_factory: Any, agent_factory:
 def label_task(data: str, selection: tuple[Any, Any, Any], unit_key: str, part: str,
                keys: Sequence[str], batch_size: int, tracker: Any) -> dict[str, float]:
     """One label unit, checked to use the driver's rules on the driver's data."""
-    from sc2data.labels.label import label_unit
+    from sc2data.labels.remote import label_unit
 
     def work(report: Reporter) -> None:
         label_unit(data, selection, unit_key, part, keys, batch_size, report)

@@ -13,8 +13,8 @@ import pytest
 from sc2data.data.dataset import INDEX
 from sc2data.schema import Schema
 from tests.cli import assert_one_line_error, run_cli
-from tests.synthetic_data import make_dataset
 from tests.data.test_storage import flip_byte_in_chunk
+from tests.synthetic_data import make_dataset
 
 
 def cli(args: list[object], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
@@ -181,10 +181,10 @@ def test_rollout_stores_exactly_what_the_simulator_played(
     actions and rewards equal a direct replay of the same seeds."""
     import numpy as np
 
-    from sc2data.game.agents import make_agent
-    from sc2data.game.env import make_env
     from sc2data.data.rollout import episode_seeds
     from sc2data.data.shards import function_call
+    from sc2data.game.agents import make_agent
+    from sc2data.game.env import make_env
 
     out = tmp_path / "sim"
     code, stdout, err = cli(["rollout", "--out", out, "--episodes", "2", "--max-steps", "120",

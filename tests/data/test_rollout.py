@@ -11,15 +11,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pysc2.agents import base_agent
 
 import sc2data
-from pysc2.agents import base_agent
 from sc2data._pysc2 import actions
-from sc2data.data.audit import verify
 from sc2data.cli import main
+from sc2data.data.audit import verify
 from sc2data.data.dataset import INDEX, MANIFEST
-from sc2data.errors import Sc2DataError
 from sc2data.data.rollout import RolloutConfig, episode_seeds, rollout
+from sc2data.errors import Sc2DataError
 from sc2data.testing.synthetic import synthetic_env_factory
 from tests.synthetic_data import config, make_dataset
 

@@ -14,11 +14,19 @@ import sc2data
 from sc2data._pysc2 import actions
 from sc2data.data.chunks import ChecksumError, Codec, fletcher32
 from sc2data.data.dataset import Dataset
-from sc2data.errors import Sc2DataError
 from sc2data.data.rollout import episode_seeds
+from sc2data.data.shards import (
+    ARG_WIDTH,
+    CHUNK_INDEX,
+    FrameSource,
+    Shard,
+    ShardWriter,
+    chunk_table,
+    flatten_args,
+    function_call,
+)
+from sc2data.errors import Sc2DataError
 from sc2data.schema import Schema, StackBatch
-from sc2data.data.shards import (ARG_WIDTH, CHUNK_INDEX, FrameSource, Shard, ShardWriter, chunk_table,
-                             flatten_args, function_call)
 from sc2data.testing.synthetic import synthetic_episode
 from tests.synthetic_data import STEPS, make_dataset
 

@@ -9,12 +9,19 @@ import numpy as np
 import pytest
 
 from sc2data._pysc2 import actions, environment, features, units  # first: pysc2 on 3.11
+
 from pysc2.agents import base_agent, random_agent  # isort: skip
 from pysc2.env import mock_sc2_env  # isort: skip
 from pysc2.lib import named_array  # isort: skip
-from sc2data.game.agents import AGENTS, ReducedRandomAgent, ScriptedAgent, make_agent, play
-from sc2data.game.env import interface_format, make_env
 from sc2data.errors import Sc2DataError
+from sc2data.game.agents import (
+    AGENTS,
+    ReducedRandomAgent,
+    ScriptedAgent,
+    make_agent,
+    play,
+)
+from sc2data.game.env import interface_format, make_env
 from sc2data.game.screen import ScreenView
 
 _F, _S, _P = actions.FUNCTIONS, features.SCREEN_FEATURES, features.Player

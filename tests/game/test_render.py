@@ -10,6 +10,7 @@ import pytest
 from matplotlib import image
 
 from sc2data._pysc2 import features, units  # first: it makes pysc2 importable on 3.11
+
 from pysc2.env import mock_sc2_env  # isort: skip
 from sc2data.cli import main
 from sc2data.game.env import interface_format

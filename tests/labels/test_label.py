@@ -12,12 +12,21 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
+from sc2data import files
 from sc2data._pysc2 import units
 from sc2data.errors import Sc2DataError
-from sc2data.labels.label import (LABELS_FILE, LOCK_FILE, PARTS_DIR, STACKS_FILE, Source, Unit, label,
-                           read_labels, read_meta)
+from sc2data.files import PARTIAL, FolderLock
+from sc2data.labels.label import PARTS_DIR, label
 from sc2data.labels.registry import Registered, RuleError, load_registry, load_rules_dir
-from sc2data.rulebase import SCREEN_PX_PER_UNIT, blank_frame, paint_disk, set_field, stack
+from sc2data.labels.source import Source, Unit
+from sc2data.labels.store import LABELS_FILE, STACKS_FILE, read_labels, read_meta
+from sc2data.rulebase import (
+    SCREEN_PX_PER_UNIT,
+    blank_frame,
+    paint_disk,
+    set_field,
+    stack,
+)
 from sc2data.schema import Schema, StackBatch
 from tests.cli import exit_code
 
@@ -158,7 +167,7 @@ def test_stale_parts_of_other_rules_are_discarded(tmp_path: Path) -> None:
 
 def nothing_written(folder: Path) -> bool:
     return not (folder / LABELS_FILE).exists() and not (folder / STACKS_FILE).exists() and \
-        not [p for p in folder.rglob("*") if ".tmp" in p.name]
+        not [p for p in folder.rglob("*") if p.name.endswith(PARTIAL)]
 
 
 def test_missing_layer_is_named_before_any_work(tmp_path: Path) -> None:
@@ -212,16 +221,14 @@ def test_failure_keeps_an_older_complete_labels_file(tmp_path: Path) -> None:
     assert read_labels(tmp_path).meta["counts"]["build_scv"] == 6
 
 
-def test_unwritable_folder_and_concurrent_runs(tmp_path: Path) -> None:
+def test_unwritable_folder_and_concurrent_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     blocker = tmp_path / "a-file"
     blocker.write_text("")
     with pytest.raises(Sc2DataError, match=r"^cannot write labels in .*a-file/data: "):
         label(source(), RULES, blocker / "data", progress=False)
-    import fcntl
-
-    with open(tmp_path / LOCK_FILE, "a+b") as held:
-        fcntl.flock(held, fcntl.LOCK_EX)
-        with pytest.raises(Sc2DataError, match="another sc2data label is running on"):
+    monkeypatch.setattr(files, "LOCK_WAIT_S", 0.2)
+    with FolderLock(tmp_path, "rollout"):  # the lock's message names the command holding it
+        with pytest.raises(Sc2DataError, match="^another sc2data rollout is writing to "):
             label(source(), RULES, tmp_path, progress=False)
     assert nothing_written(tmp_path)
 
@@ -388,7 +395,8 @@ def test_cli_label_in_worker_processes_equals_one_process(
 def test_label_unit_reloads_for_a_new_run_in_a_long_lived_process(tmp_path: Path) -> None:
     """A process that labels units of several runs (Ray's workers do) sees each run's data:
     after the dataset at the same path is rolled out anew, a second label run works."""
-    from sc2data.labels.label import label_dataset, label_unit
+    from sc2data.labels.label import label_dataset
+    from sc2data.labels.remote import label_unit
 
     data = tmp_path / "data"
 

@@ -9,16 +9,21 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from tests.mem_helpers import SMALL_SCHEMA  # noqa: E402
-
 from sc2data import load_model  # noqa: E402
 from sc2data._pysc2 import units  # noqa: E402
 from sc2data.errors import Sc2DataError  # noqa: E402
-from sc2data.model.mem import (MEM, ModelConfig, load_checkpoint, save_checkpoint,  # noqa: E402
-                           to_tensors, value_tables)
+from sc2data.model.mem import (  # noqa: E402
+    MEM,
+    ModelConfig,
+    load_checkpoint,
+    save_checkpoint,
+    to_tensors,
+    value_tables,
+)
 from sc2data.model.reward import MEMScorer  # noqa: E402
 from sc2data.schema import Schema  # noqa: E402
 from sc2data.testing.synthetic_pairs import stacks  # noqa: E402
+from tests.mem_helpers import SMALL_SCHEMA  # noqa: E402
 
 VECTORS = np.random.default_rng(0).normal(size=(4, 5)).astype(np.float32)
 WORDS = ("build", "a", "supply", "depot")

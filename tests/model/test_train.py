@@ -13,13 +13,11 @@ import pytest
 
 pytest.importorskip("torch")
 
-from tests.cli import assert_one_line_error, run_cli
-from tests.mem_helpers import (tiny_pairset,  # noqa: E402
-                         train_tiny)
-
 import sc2data.pairs.loader as loader_mod  # noqa: E402
 from sc2data.model.evaluate import evaluate  # noqa: E402
 from sc2data.pairs.loader import PairLoader, PairSet  # noqa: E402
+from tests.cli import assert_one_line_error, run_cli
+from tests.mem_helpers import tiny_pairset, train_tiny  # noqa: E402
 
 
 @pytest.fixture(scope="module")

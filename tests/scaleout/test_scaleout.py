@@ -21,9 +21,10 @@ import pytest
 
 import sc2data
 from sc2data.data.dataset import INDEX
-from sc2data.errors import Sc2DataError
-from sc2data.labels.label import STACKS_FILE, label_dataset
 from sc2data.data.rollout import RolloutConfig, _make_agent, episode_seeds, rollout
+from sc2data.errors import Sc2DataError
+from sc2data.labels.label import label_dataset
+from sc2data.labels.store import STACKS_FILE
 from sc2data.scaleout.driver import RayOptions, label_on_ray, rollout_on_ray
 from tests.cli import assert_one_line_error, run_cli
 

@@ -29,7 +29,14 @@ import random
 import numpy as np
 
 from sc2data.game.sim import mapdata as md
-from sc2data.game.sim.codes import ARRIVE, BUILD_DONE, FIRE, HARVEST_DONE, PRODUCE_DONE, RECHECK
+from sc2data.game.sim.codes import (
+    ARRIVE,
+    BUILD_DONE,
+    FIRE,
+    HARVEST_DONE,
+    PRODUCE_DONE,
+    RECHECK,
+)
 from sc2data.game.sim.store import (
     ATTACK,
     BUILD,

@@ -13,7 +13,16 @@ import math
 from sc2data.game.sim import mapdata as md
 from sc2data.game.sim.codes import ARRIVE, HARVEST_DONE, MUST_TARGET_UNIT
 from sc2data.game.sim.core import GameCore
-from sc2data.game.sim.store import GATHER, HARVESTING, IDLE, RETURN, TO_CC, TO_PATCH, WAITING, Unit
+from sc2data.game.sim.store import (
+    GATHER,
+    HARVESTING,
+    IDLE,
+    RETURN,
+    TO_CC,
+    TO_PATCH,
+    WAITING,
+    Unit,
+)
 
 
 class Mining(GameCore):

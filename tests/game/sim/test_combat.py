@@ -5,8 +5,15 @@ from __future__ import annotations
 import math
 
 from sc2data.game.sim import mapdata as md
-
-from tests.game.sim.sim_helpers import F, new_env, of_type, pixel, select, step, wait_until
+from tests.game.sim.sim_helpers import (
+    F,
+    new_env,
+    of_type,
+    pixel,
+    select,
+    step,
+    wait_until,
+)
 
 
 def two_marines(gap: float = 3.0):  # type: ignore[no-untyped-def]

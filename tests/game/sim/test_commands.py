@@ -10,8 +10,16 @@ from sc2data._pysc2 import actions, features, sc2_env
 from sc2data.game.env import interface_format
 from sc2data.game.sim import mapdata as md
 from sc2data.game.sim.commands import functions_for
-
-from tests.game.sim.sim_helpers import F, new_env, of_type, pixel, scvs, select, step, wait_until
+from tests.game.sim.sim_helpers import (
+    F,
+    new_env,
+    of_type,
+    pixel,
+    scvs,
+    select,
+    step,
+    wait_until,
+)
 
 sc_pb = sc2_env.sc_pb
 

@@ -7,8 +7,15 @@ import numpy as np
 from sc2data._pysc2 import actions, environment
 from sc2data.game.sim import EVENT_KINDS, BuildMarinesEnv, Event
 from sc2data.game.sim import mapdata as md
-
-from tests.game.sim.sim_helpers import BARRACKS_SITE, F, new_env, of_type, select, step, wait_until
+from tests.game.sim.sim_helpers import (
+    BARRACKS_SITE,
+    F,
+    new_env,
+    of_type,
+    select,
+    step,
+    wait_until,
+)
 
 FIRST, MID, LAST = environment.StepType.FIRST, environment.StepType.MID, environment.StepType.LAST
 

@@ -8,8 +8,17 @@ import pytest
 from sc2data._pysc2 import features
 from sc2data.game.sim import mapdata as md
 from sc2data.game.sim.observe import DiskStamp, stamp
-
-from tests.game.sim.sim_helpers import DEPOT_SITE, F, build, new_env, of_type, scvs, select, step, wait_until
+from tests.game.sim.sim_helpers import (
+    DEPOT_SITE,
+    F,
+    build,
+    new_env,
+    of_type,
+    scvs,
+    select,
+    step,
+    wait_until,
+)
 
 S = features.SCREEN_FEATURES
 M = features.MINIMAP_FEATURES

@@ -5,7 +5,6 @@ from __future__ import annotations
 import pytest
 
 from sc2data.game.sim import mapdata as md
-
 from tests.game.sim.sim_helpers import (
     BARRACKS_SITE,
     DEPOT_SITE,

@@ -6,8 +6,16 @@ import numpy as np
 
 from sc2data._pysc2 import features
 from sc2data.game.sim import mapdata as md
-
-from tests.game.sim.sim_helpers import F, new_env, of_type, pixel, scvs, select, step, unit_pixel
+from tests.game.sim.sim_helpers import (
+    F,
+    new_env,
+    of_type,
+    pixel,
+    scvs,
+    select,
+    step,
+    unit_pixel,
+)
 
 
 def test_select_point_on_an_scv() -> None:

@@ -8,7 +8,6 @@ import pytest
 from sc2data._pysc2 import actions, features
 from sc2data.game.env import interface_format, make_env
 from sc2data.game.sim import BuildMarinesEnv
-
 from tests.game.sim.sim_helpers import F, new_env, step
 
 named_array = features.named_array

@@ -1,0 +1,138 @@
+"""Safe files: written whole or not at all, hashed by content, and folders locked while written.
+
+Every writer in sc2data goes through this module:
+
+* a file is written under a temporary ``….partial`` name, fsynced, renamed into place and its
+  folder fsynced (:func:`atomic_file`, :func:`write_atomic`, :func:`publish`), so a crash or
+  Ctrl-C leaves the old file or none, never a half-written one under the final name; readers and
+  resumed runs treat any ``*.partial`` as debris;
+* content is identified by sha256 (:func:`sha256_file`, :func:`sha256_files`);
+* one :class:`FolderLock` per output folder (``.lock``) keeps two commands from writing it at once,
+  and the refusal names the command that holds it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import hashlib
+import os
+import time
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+
+from sc2data.errors import Sc2DataError
+
+PARTIAL = ".partial"
+"""Suffix of a file or folder still being written; never a complete result."""
+
+LOCK = ".lock"
+"""The lock file in every folder an sc2data command writes."""
+
+LOCK_WAIT_S = 10.0
+"""How long a command waits for another's lock on its folder before refusing."""
+
+
+def fsync_path(path: Path) -> None:
+    """Flush a file (or a folder's entries) to disk."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def publish(tmp: Path, final: Path) -> None:
+    """Give a complete, fsynced ``tmp`` (file or folder) its final name, durably."""
+    if tmp.is_file():
+        fsync_path(tmp)
+    os.replace(tmp, final)
+    fsync_path(final.parent)
+
+
+@contextlib.contextmanager
+def atomic_file(path: Path) -> Iterator[Path]:
+    """Yield a temporary path to write ``path``'s content to; on success it becomes ``path``
+    (fsynced), on any exception it is removed. The temporary name carries the process id, so
+    concurrent attempts (a retried Ray task) never write one file."""
+    tmp = path.with_name(f"{path.name}.{os.getpid()}{PARTIAL}")
+    try:
+        yield tmp
+        publish(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def write_atomic(path: Path, data: bytes) -> None:
+    """Write ``path`` so that it is either absent, old, or complete."""
+    with atomic_file(path) as tmp:
+        tmp.write_bytes(data)
+
+
+def sha256_files(paths: Iterable[Path]) -> str:
+    """sha256 over the given files' bytes, in order."""
+    h = hashlib.sha256()
+    for p in paths:
+        with open(p, "rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                h.update(block)
+    return h.hexdigest()
+
+
+def sha256_file(path: Path) -> str:
+    """sha256 of one file's bytes."""
+    return sha256_files([path])
+
+
+class FolderLock:
+    """``flock`` on ``folder/.lock`` for one command (``rollout``, ``label``, …).
+
+    Taken exclusively, it records the command in the lock file, so another command that finds
+    the folder locked can say which one holds it. A rollout takes it exclusively while it
+    prepares the folder, then :meth:`share`\\ s it with its worker processes, which take shared
+    locks: a second run then waits for every process of the first (orphaned workers of a killed
+    run included). A command waits up to ``wait_s`` seconds, then refuses in one line.
+    """
+
+    def __init__(self, folder: Path, command: str, *, exclusive: bool = True,
+                 wait_s: float | None = None) -> None:
+        self.folder, self.command = folder, command
+        self._fd = os.open(folder / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            self._take(fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH,
+                       LOCK_WAIT_S if wait_s is None else wait_s)
+            if exclusive:
+                os.ftruncate(self._fd, 0)
+                os.pwrite(self._fd, f"sc2data {command} (pid {os.getpid()})\n".encode(), 0)
+        except BaseException:
+            os.close(self._fd)
+            raise
+
+    def _holder(self) -> str:
+        with contextlib.suppress(OSError, UnicodeDecodeError):
+            text = os.pread(self._fd, 200, 0).decode().strip()
+            if text.startswith("sc2data "):
+                return text.split(" (pid")[0]
+        return "sc2data command"
+
+    def _take(self, mode: int, wait_s: float) -> None:
+        deadline = time.monotonic() + wait_s
+        while True:
+            try:
+                fcntl.flock(self._fd, mode | fcntl.LOCK_NB)
+                return
+            except BlockingIOError:
+                if time.monotonic() >= deadline:
+                    raise Sc2DataError(f"another {self._holder()} is writing to {self.folder}; "
+                                       f"wait for it to finish or stop it") from None
+                time.sleep(0.05)
+
+    def share(self) -> None:
+        """Downgrade to a shared lock, so that this run's workers can take theirs."""
+        fcntl.flock(self._fd, fcntl.LOCK_SH)
+
+    def __enter__(self) -> FolderLock:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        os.close(self._fd)

@@ -3,12 +3,18 @@
 from __future__ import annotations
 
 import sys
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Optional
+from typing import TYPE_CHECKING, Optional
+
+if TYPE_CHECKING:
+    from sc2data.scaleout.driver import RayOptions
 
 import typer
 
+from sc2data.cliopts import OptionGroup, config_options, option, with_options
 from sc2data.errors import Sc2DataError
+from sc2data.model.train import TrainConfig
 
 app = typer.Typer(
     name="sc2data",
@@ -41,38 +47,52 @@ app.add_typer(rules_app, name="rules")
 _RULES_DIR_HELP = "Also load the rules defined by the .py files of this folder."
 
 
-# -- Ray options, shared by rollout and label (sc2data.scaleout.driver) --------------------------------
-def _ray_option() -> Any:
-    return typer.Option(None, "--ray", metavar="[ADDRESS]",
-                        help="Run as Ray tasks: --ray alone starts a local Ray instance; auto, "
-                             "HOST:PORT or ray://HOST:PORT joins a running cluster.")
+# -- option groups shared by several commands --------------------------------------------------
+@dataclass(frozen=True)
+class RayArgs:
+    """The ``--ray*`` options as given; :meth:`options` checks them once the worker count is known."""
+
+    address: str | None
+    retries: int
+    timeout: float
+    memory: int | None
+
+    def options(self, workers: int | None = None) -> RayOptions | None:
+        """The scale-out settings (None without ``--ray``); a missing Ray is a one-line error."""
+        if self.address is None:
+            return None
+        from sc2data.scaleout.driver import RayOptions, require_ray
+
+        require_ray()
+        options = RayOptions.parse(self.address, retries=self.retries, timeout_s=self.timeout,
+                                   memory_mb=self.memory, workers=workers)
+        options.validate()
+        return options
 
 
-def _ray_retries() -> Any:
-    return typer.Option(2, "--ray-retries", help="With --ray: extra attempts per task after a "
-                                                 "worker death, a crashed game or a hang.")
+RAY = OptionGroup("ray", (
+    option("ray_address", Optional[str], typer.Option(
+        None, "--ray", metavar="[ADDRESS]",
+        help="Run as Ray tasks: --ray alone starts a local Ray instance; auto, HOST:PORT or "
+             "ray://HOST:PORT joins a running cluster.")),
+    option("ray_retries", int, typer.Option(
+        2, "--ray-retries",
+        help="With --ray: extra attempts per task after a worker death, a crashed game or a hang.")),
+    option("ray_timeout", float, typer.Option(
+        600.0, "--ray-timeout",
+        help="With --ray: seconds a task may go without progress before it is retried.")),
+    option("ray_memory", Optional[int], typer.Option(
+        None, "--ray-memory",
+        help="With --ray: MB of memory to request per task [default: 512 sim, 2048 sc2, 1024 "
+             "label].")),
+), lambda v: RayArgs(v["ray_address"], v["ray_retries"], v["ray_timeout"], v["ray_memory"]))
+"""``--ray`` and its settings (sc2data.scaleout.driver), for rollout, label and build."""
 
-
-def _ray_timeout() -> Any:
-    return typer.Option(600.0, "--ray-timeout", help="With --ray: seconds a task may go "
-                                                     "without progress before it is retried.")
-
-
-def _ray_memory() -> Any:
-    return typer.Option(None, "--ray-memory", help="With --ray: MB of memory to request per "
-                                                   "task [default: 512 sim, 2048 sc2, 1024 "
-                                                   "label].")
-
-
-def _ray_options(address: str, retries: int, timeout: float, memory: Optional[int],
-                 workers: Optional[int] = None) -> Any:
-    from sc2data.scaleout.driver import RayOptions, require_ray
-
-    require_ray()
-    options = RayOptions.parse(address, retries=retries, timeout_s=timeout, memory_mb=memory,
-                               workers=workers)
-    options.validate()
-    return options
+PROGRESS = OptionGroup("progress", (
+    option("progress", Optional[bool], typer.Option(
+        None, "--progress/--no-progress",
+        help="Progress bars [default: on a terminal; with stderr in a file, a line a minute].")),
+), lambda v: v["progress"])
 
 
 def _bare_ray(argv: list[str]) -> list[str]:
@@ -98,6 +118,7 @@ def rules_list(
 
 
 @app.command()
+@with_options(PROGRESS, RAY)
 def label(
     data: Path = typer.Argument(..., help="Dataset folder (from sc2data rollout)."),
     rules: Optional[str] = typer.Option(None, "--rules", help="Comma-separated rule ids to use "
@@ -108,12 +129,8 @@ def label(
     batch_size: int = typer.Option(256, "--batch-size", help="Stacks per rule call."),
     workers: int = typer.Option(1, "--workers", help="Processes labelling shards at once "
                                                      "(the labels do not depend on it)."),
-    progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",
-                                            help="Progress bar (default: on a terminal)."),
-    ray: Optional[str] = _ray_option(),
-    ray_retries: int = _ray_retries(),
-    ray_timeout: float = _ray_timeout(),
-    ray_memory: Optional[int] = _ray_memory(),
+    progress: Optional[bool] = None,
+    ray: Optional[RayArgs] = None,
 ) -> None:
     """Label every stack of DATA with the rules; writes labels.parquet and stack_labels.parquet."""
     from sc2data.labels.label import label_dataset
@@ -122,10 +139,10 @@ def label(
     selection = {"include": parse_ids(rules), "exclude": parse_ids(exclude) or [],
                  "rules_dir": rules_dir, "batch_size": batch_size, "progress": progress}
     lines: list[str] = []
-    if ray is not None:
+    options = ray.options() if ray else None
+    if options is not None:
         from sc2data.scaleout.driver import label_on_ray
 
-        options = _ray_options(ray, ray_retries, ray_timeout, ray_memory)
         summary, report = label_on_ray(data, options, **selection)
         lines = report.lines() if report.tasks else []
     else:
@@ -153,6 +170,7 @@ def render(
 
 
 @app.command()
+@with_options(PROGRESS, RAY)
 def rollout(
     out: Path = typer.Option(..., "--out", help="Dataset folder (created; rerun to resume)."),
     env: Optional[str] = typer.Option(None, help="Backend: sim (embedded simulator, default) or "
@@ -171,12 +189,8 @@ def rollout(
                                                      "data does not depend on it."),
     episodes_per_shard: int = typer.Option(8, help="Episodes per shard file."),
     max_steps: Optional[int] = typer.Option(None, help="Cut episodes after this many steps."),
-    progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",
-                                            help="Progress bar (default: on a terminal)."),
-    ray: Optional[str] = _ray_option(),
-    ray_retries: int = _ray_retries(),
-    ray_timeout: float = _ray_timeout(),
-    ray_memory: Optional[int] = _ray_memory(),
+    progress: Optional[bool] = None,
+    ray: Optional[RayArgs] = None,
 ) -> None:
     """Play episodes and store every 2-frame stack in sharded, checksummed HDF5."""
     from sc2data.data.rollout import RolloutConfig
@@ -196,10 +210,10 @@ def rollout(
     else:
         config = RolloutConfig(**given, **extra)
     lines: list[str] = []
-    if ray is not None:
+    options = ray.options(workers) if ray else None
+    if options is not None:
         from sc2data.scaleout.driver import rollout_on_ray
 
-        options = _ray_options(ray, ray_retries, ray_timeout, ray_memory, workers)
         s, report = rollout_on_ray(config, out, options, progress=progress)
         lines = report.lines() if report.tasks else []
     else:
@@ -211,14 +225,14 @@ def rollout(
 
 
 @app.command()
+@with_options(PROGRESS)
 def pair(
     recipe: Path = typer.Argument(..., help="Recipe (manifests/*.toml)."),
     data: Path = typer.Option(..., "--data", help="Labelled dataset folder (sc2data rollout, "
                                                   "then sc2data label)."),
     out: Optional[Path] = typer.Option(None, "--out", help="Pair-set folder [default: "
                                                            "DATA/pairs-<recipe name>]."),
-    progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",
-                                            help="Progress bar (default: on a terminal)."),
+    progress: Optional[bool] = None,
 ) -> None:
     """Draw the recipe's matched, mismatched and null pairs; pack the stacks of each split."""
     from sc2data.pairs.pairset import make_pairset
@@ -232,18 +246,15 @@ def pair(
 
 
 @app.command()
+@with_options(PROGRESS, RAY)
 def build(
     recipe: Path = typer.Argument(..., help="Recipe (manifests/*.toml)."),
     out: Path = typer.Option(..., "--out", help="Build folder (created; rerun to resume)."),
     workers: Optional[int] = typer.Option(None, help="Rollout and label processes [default: 2]; "
                                                      "with --ray, tasks at once [default: all "
                                                      "CPUs]. The data does not depend on it."),
-    progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",
-                                            help="Progress bars (default: on a terminal)."),
-    ray: Optional[str] = _ray_option(),
-    ray_retries: int = _ray_retries(),
-    ray_timeout: float = _ray_timeout(),
-    ray_memory: Optional[int] = _ray_memory(),
+    progress: Optional[bool] = None,
+    ray: Optional[RayArgs] = None,
 ) -> None:
     """Run a recipe end to end: rollout → label → pair, resuming whatever is already done."""
     from sc2data.build import PAIRS_DIR
@@ -251,8 +262,7 @@ def build(
     from sc2data.recipe import load
 
     r = load(recipe)
-    options = None if ray is None else _ray_options(ray, ray_retries, ray_timeout, ray_memory,
-                                                      workers)
+    options = ray.options(workers) if ray else None
     report = run(r, out, workers=2 if workers is None else workers, progress=progress,
                  ray=options)
     for line in report.lines:
@@ -285,35 +295,14 @@ def verify(folder: Path = typer.Argument(..., help="Dataset folder.")) -> None:
 
 
 @app.command("train")
-def train_cmd(
-    data: Path = typer.Argument(..., help="Pair-set folder (sc2data pair / build output)."),
-    out: Optional[Path] = typer.Option(None, "--out", help="Run folder [default: "
-                                       "runs/{recipe}__{seed}__{time}]."),
-    epochs: int = typer.Option(20, help="Passes over the training pairs (paper: 20)."),
-    batch_size: int = typer.Option(32, help="Pairs per step (paper: 32)."),
-    lr: float = typer.Option(5e-4, help="Adam learning rate (paper: 5e-4)."),
-    l2: float = typer.Option(2.5e-3, help="λ of the weight penalty (paper: 2.5e-3)."),
-    device: str = typer.Option("auto", help="auto, cpu or cuda."),
-    seed: int = typer.Option(0, help="Seed of everything random."),
-    vectors: Optional[Path] = typer.Option(None, help="word2vec/GloVe/fastText file "
-                                           "[default: GloVe 6B-50d]."),
-    vocab_size: int = typer.Option(50_000, help="Words kept from the vectors."),
-    categorical: str = typer.Option("onehot", help="Categorical layers: onehot, embed, scalar."),
-    pool: int = typer.Option(2, help="Pool spatial layers p×p into cell shares (1 = off)."),
-    threads: Optional[int] = typer.Option(None, help="torch CPU threads [default: cores - 1]."),
-    amp: bool = typer.Option(False, help="bfloat16 autocast on CUDA."),
-    overwrite: bool = typer.Option(False, help="Reuse a non-empty run folder."),
-    progress: bool = typer.Option(True, help="Show the progress bar."),
-) -> None:
+@with_options(config_options(TrainConfig, arguments={
+    "data": "Pair-set folder (sc2data pair / build output)."}, flags={"progress": "--progress/--no-progress"}))
+def train_cmd(config: Optional[TrainConfig] = None) -> None:
     """Train the mutual-embedding model; keep the checkpoint of minimum validation loss."""
-    from sc2data.model.train import TrainConfig, train
+    from sc2data.model.train import train
 
-    run = train(TrainConfig(
-        data=str(data), out=str(out) if out else None, epochs=epochs, batch_size=batch_size,
-        lr=lr, l2=l2, device=device, seed=seed, vectors=str(vectors) if vectors else None,
-        vocab_size=vocab_size, categorical=categorical, pool=pool, threads=threads, amp=amp,
-        overwrite=overwrite, progress=progress))
-    typer.echo(f"run: {run}")
+    assert config is not None
+    typer.echo(f"run: {train(config)}")
 
 
 @app.command("evaluate")

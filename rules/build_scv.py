@@ -23,7 +23,7 @@ from sc2data.rulebase import Rule, change
 from sc2data.schema import StackBatch
 
 MARINE_MINERALS = 50
-"""A marine's mineral cost (Legacy of the Void data; brief §4)."""
+"""A marine's mineral cost (Legacy of the Void game data)."""
 
 
 class BuildScv(Rule):

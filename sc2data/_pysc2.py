@@ -1,6 +1,6 @@
 """Import pysc2 4.0.0 on Python 3.11 with no manual step.
 
-Two known breakages of the last released pysc2 (brief §5) are handled here, once, and every other
+Two known breakages of the last released pysc2 (4.0.0) on Python 3.11 are handled here, once, and every other
 module imports pysc2 through this one:
 
 * ``s2clientprotocol`` ships old generated protobuf code. We pin ``protobuf<3.21``; if another
@@ -40,12 +40,13 @@ def _shuffle_compat(x: MutableSequence[Any], random_fn: Callable[[], float] | No
 
 random.shuffle = _shuffle_compat  # type: ignore[assignment]
 try:
+    from pysc2.agents import base_agent  # noqa: E402
     from pysc2.env import environment, sc2_env  # noqa: E402
     from pysc2.lib import actions, colors, features, point, units  # noqa: E402
 finally:
     random.shuffle = _shuffle
 
-__all__ = ["actions", "colors", "environment", "features", "interface_format", "point", "sc2_env",
+__all__ = ["actions", "base_agent", "colors", "environment", "features", "interface_format", "point", "sc2_env",
            "units"]
 
 

@@ -227,7 +227,7 @@ def set_field(frame: dict[str, np.ndarray], vector: str, field: str, value: int)
 
 
 SCREEN_PX_PER_UNIT = 64 / 24
-"""Screen pixels per world unit at 64×64 (the screen spans 24 world units; brief §3)."""
+"""Screen pixels per world unit at 64×64 (the screen spans 24 world units)."""
 
 
 def paint_disk(frame: dict[str, np.ndarray], key: str, center: tuple[float, float],

@@ -33,7 +33,7 @@ PAPER_SCREEN: tuple[str, ...] = (
     "unit_type", "selected", "unit_hit_points", "unit_energy", "unit_shields", "unit_density",
     "unit_density_aa",
 )
-"""pysc2 1.x's 13 screen layers: the paper's screen state (brief §5)."""
+"""pysc2 1.x's 13 screen layers: the paper's screen state (all still exist by name in 4.0)."""
 
 PAPER_MINIMAP: tuple[str, ...] = (
     "height_map", "visibility_map", "creep", "camera", "player_id", "player_relative", "selected",

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from sc2data._pysc2 import base_agent, environment
 from sc2data.data.chunks import Codec
 from sc2data.data.dataset import (
     MANIFEST,
@@ -37,6 +38,7 @@ from sc2data.errors import Sc2DataError
 from sc2data.files import LOCK, PARTIAL, FolderLock, publish, sha256_file
 from sc2data.formats import DATASET
 from sc2data.game import env as envs
+from sc2data.progress import Bar
 from sc2data.progress import bar as progress_bar
 from sc2data.provenance import versions
 from sc2data.recipe import Recipe, RolloutSpec
@@ -44,11 +46,11 @@ from sc2data.schema import Schema
 from sc2data.vocab import BACKENDS, EPISODE_STEPS, LAYER_SETS, MAP_NAME
 from sc2data.workers import run_parallel
 
-EnvFactory = Callable[[int], Any]
+EnvFactory = Callable[[int], environment.Base]
 """``seed -> environment.Base`` (a pysc2 environment) for one episode."""
-AgentFactory = Callable[[int], Any]
+AgentFactory = Callable[[int], base_agent.BaseAgent]
 """``seed -> pysc2 BaseAgent`` for one episode."""
-ShardRunner = Callable[["RolloutConfig", Path, list[int], EnvFactory, AgentFactory, Any],
+ShardRunner = Callable[["RolloutConfig", Path, list[int], EnvFactory, AgentFactory, Bar],
                       dict[int, list[dict[str, Any]]]]
 """Writes the shards ``todo`` elsewhere than in local worker processes (Ray tasks:
 ``sc2data.scaleout.driver.RayShards``): ``runner(config, out, todo, env_factory, agent_factory, bar)``,
@@ -131,11 +133,11 @@ def default_env_factory(config: RolloutConfig) -> EnvFactory:
     return functools.partial(_make_env, config.env, config.step_mul)
 
 
-def _make_env(backend: str, step_mul: int, seed: int) -> Any:
+def _make_env(backend: str, step_mul: int, seed: int) -> environment.Base:
     return envs.make_env(backend, seed=seed, step_mul=step_mul)
 
 
-def _make_agent(name: str, seed: int) -> Any:
+def _make_agent(name: str, seed: int) -> base_agent.BaseAgent:
     from sc2data.game.agents import make_agent
 
     return make_agent(name, seed=seed)
@@ -146,7 +148,7 @@ def default_agent_factory(config: RolloutConfig) -> AgentFactory:
 
 
 # -- one shard ----------------------------------------------------------------------------------
-def play_episode(env: Any, agent: Any, writer: ShardWriter, max_steps: int | None,
+def play_episode(env: environment.Base, agent: base_agent.BaseAgent, writer: ShardWriter, max_steps: int | None,
                  report: Callable[[int], None]) -> int:
     """Play one episode into ``writer``: frame 0, then (action, frame t+1, reward) per step."""
     timestep = env.reset()[0]

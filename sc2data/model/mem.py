@@ -1,6 +1,6 @@
 """The mutual-embedding model (MEM): a state encoder and a command encoder into one 256-d space.
 
-Paper, Fig. 1–2 (brief §2): the screen stack and the minimap stack each go through an identical
+Paper, Fig. 1–2: the screen stack and the minimap stack each go through an identical
 2-layer 2-d CNN, the non-spatial features through one fully-connected layer with a non-linearity;
 the three are concatenated and projected to 256. A command's words are looked up in frozen
 pretrained vectors, run through an LSTM and projected to 256. A state and a command match when

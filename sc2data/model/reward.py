@@ -1,6 +1,6 @@
 """A trained MEM as a scorer: ``sc2data.load_model(RUN).distance(stacks, texts)``.
 
-The object a reinforcement-learning loop calls every step (brief §1: narration as a dense shaping
+The object a reinforcement-learning loop calls every step (the paper's purpose: narration as a dense shaping
 reward): batched, on CPU or GPU, with command embeddings cached (a narration repeats the same few
 commands), and the same input packing as training. Evaluation and t-SNE use it too.
 """

@@ -1,6 +1,6 @@
 """Read a pair-set folder (``sc2data pair`` output) and feed its pairs to the trainer in batches.
 
-The folder (see ``PAIRSET.md``): ``pairs.parquet``, ``pairset.json``, ``packed/<split>.h5``.
+The folder (``docs/pairset.md``): ``pairs.parquet``, ``pairset.json``, ``packed/<split>.h5``.
 :class:`PairSet` validates it and gives each split's pairs as columns; :class:`PairLoader` turns
 one split into batches without random HDF5 reads: it visits the packed file's blocks in random
 order, decodes a window of consecutive-in-that-order blocks at once, shuffles the pairs whose

@@ -29,7 +29,7 @@ BLOCK = 256
 
 
 def _compression() -> Mapping[str, Any]:
-    # LZ4 decodes fastest of the lossless filters measured in brief §6; training decodes every
+    # LZ4 decodes fastest of the lossless HDF5 filters we measured (BENCHMARKS.md, codecs); training decodes every
     # stack once per epoch, so decode speed matters more than the last few percent of size.
     return dict(hdf5plugin.LZ4())
 

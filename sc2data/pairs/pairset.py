@@ -20,11 +20,13 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
+from sc2data.data.dataset import Dataset
 from sc2data.errors import Sc2DataError
 from sc2data.files import PARTIAL, fsync_path, publish, sha256_files
 from sc2data.formats import PAIRSET
 from sc2data.pairs.draw import Labelled, build_pairs
 from sc2data.pairs.packed import PackedWriter
+from sc2data.progress import Bar
 from sc2data.provenance import versions
 from sc2data.recipe import Recipe
 from sc2data.vocab import SPLITS
@@ -59,6 +61,18 @@ class PairsetSummary:
         return "\n".join(lines)
 
 
+def check_texts(recipe: Recipe, rule_commands: dict[str, str]) -> None:
+    """A command's canonical text is its rule's: the labels record the rule's ``command``, the pairs
+    the recipe's ``text``, and a model trained on one but read with the other would silently
+    mean another thing. Other wordings belong in the recipe's paraphrases."""
+    for c in recipe.commands:
+        rule_text = rule_commands.get(c.id)
+        if rule_text is not None and c.text != rule_text:
+            raise Sc2DataError(f"recipe {recipe.name!r}: command {c.id} has text {c.text!r}, but "
+                               f"rule {c.id} says {rule_text!r}; use the rule's text in the "
+                               f"recipe and list other wordings as paraphrases")
+
+
 def labelled_stacks(recipe: Recipe, data: Path) -> tuple[Labelled, dict[str, Any]]:
     """Every stack of ``data`` with the recipe's rules' verdicts, from ``sc2data label``'s files."""
     from sc2data.labels.store import read_labels
@@ -70,6 +84,7 @@ def labelled_stacks(recipe: Recipe, data: Path) -> tuple[Labelled, dict[str, Any
         raise Sc2DataError(f"the labels in {data} have no rule {', '.join(missing)} (labelled "
                            f"with: {', '.join(ids)}); relabel with sc2data label {data} --rules "
                            f"{','.join(recipe.rule_ids)}")
+    check_texts(recipe, {r["id"]: r["command"] for r in labels.meta["rules"]})
     t = labels.stacks
     fires = np.stack([t[c.id].to_numpy(zero_copy_only=False) for c in recipe.commands], axis=1)
     data_labelled = Labelled(t["episode"].to_numpy().astype(np.int64),
@@ -95,8 +110,8 @@ def _existing(out: Path, identity: dict[str, Any]) -> dict[str, Any] | None:
     return meta if meta.get("identity") == identity else None
 
 
-def _pack_split(ds: Any, split: str, pairs: pa.Table, path: Path, seed: int,
-                progress: Any) -> tuple[pa.Table, int]:
+def _pack_split(ds: Dataset, split: str, pairs: pa.Table, path: Path, seed: int,
+                progress: Bar) -> tuple[pa.Table, int]:
     """Copy the split's distinct stacks into ``path``; add each pair's ``state`` row.
 
     Rows go episode by episode, the episodes in a seeded random order and each episode's steps

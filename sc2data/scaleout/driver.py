@@ -34,10 +34,17 @@ from collections import deque
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sc2data.errors import MissingDependencyError, Sc2DataError
+from sc2data.progress import Bar
 from sc2data.scaleout.tasks import Tracker, describe, label_task, rollout_task
+
+if TYPE_CHECKING:  # types only: the stages import this module, not the other way round
+    from sc2data.data.rollout import AgentFactory, EnvFactory, RolloutConfig, RolloutSummary
+    from sc2data.labels.label import LabelSummary
+    from sc2data.labels.remote import Selection
+    from sc2data.labels.source import Unit
 
 DEFAULT_RETRIES = 2
 """Extra attempts per task after a worker death, a crashed instance or a hang."""
@@ -228,88 +235,114 @@ def _system_failure(ray: Any, e: BaseException) -> str:
     return f"{type(e).__name__}: {str(e).strip().splitlines()[0] if str(e).strip() else ''}"
 
 
-def drive(ray: Any, remote_fn: Any, tasks: list[_Task], options: RayOptions, bar: Any,
+class _Driver:
+    """Runs tasks on Ray: at most ``options.workers`` in flight, each retried (by Ray for a dead
+    worker, by us for a hang) up to ``options.retries`` times; progress comes from the tracker
+    actor, which every attempt reports to."""
+
+    def __init__(self, ray: Any, remote_fn: Any, tasks: list[_Task], options: RayOptions,
+                 what: str) -> None:
+        self.ray, self.remote_fn, self.tasks, self.options, self.what = \
+            ray, remote_fn, tasks, options, what
+        self.tracker = _tracker(ray)
+        self.allowed = options.retries + 1
+        self.waiting: deque[_Task] = deque(tasks)
+        self.running: dict[Any, _Task] = {}
+        self.cancelled: dict[str, str] = {}
+        """Attempt token → why we cancelled it."""
+        self.attempts: dict[str, list[dict[str, Any]]] = {}
+        """Task key → its attempts, as the tracker last reported them."""
+        self.report = ScaleoutReport(tasks=len(tasks))
+
+    def submit(self, task: _Task) -> None:
+        task.seen = len(self.attempts.get(task.key, ()))
+        task.max_retries = self.allowed - 1 - task.seen
+        ref = self.remote_fn.options(max_retries=task.max_retries).remote(*task.args,
+                                                                          self.tracker)
+        self.running[ref] = task
+
+    def give_up(self, task: _Task, reason: str, n: int) -> Sc2DataError:
+        return Sc2DataError(f"{self.what} of {task.key} failed after {n} attempt(s) (retries: "
+                            f"{self.options.retries}): {reason}; rerun the same command to "
+                            f"resume")
+
+    def record(self, task: _Task) -> None:
+        tries = self.attempts.get(task.key, [])
+        if len(tries) > 1:
+            self.report.retried[task.key] = _outcomes(tries, self.cancelled)
+
+    def collect(self, ref: Any) -> None:
+        """Take a finished task's result, or fail in one line."""
+        ray, task = self.ray, self.running.pop(ref)
+        try:
+            result = ray.get(ref)
+        except ray.exceptions.TaskCancelledError:
+            return  # we cancelled it as hung; already resubmitted or failed
+        except ray.exceptions.RayTaskError as e:
+            cause = e.cause if e.cause is not None else e
+            if not isinstance(cause, transient_errors()):
+                raise Sc2DataError(f"{self.what} of {task.key} failed: "
+                                   f"{describe(cause)}") from None
+            raise self.give_up(task, f"the instance crashed: {describe(cause)}",
+                               task.seen + task.max_retries + 1) from None
+        except ray.exceptions.RayError as e:  # Ray retried it as often as allowed
+            raise self.give_up(task, _system_failure(ray, e),
+                               task.seen + task.max_retries + 1) from None
+        r = self.report
+        r.results[task.key] = result.get("rows")
+        r.peak_rss_mb = max(r.peak_rss_mb, result["rss_mb"])
+        r.peak_children_rss_mb = max(r.peak_children_rss_mb, result["children_rss_mb"])
+        self.record(task)
+
+    def cancel_hung(self) -> None:
+        """Cancel and resubmit every task whose attempt made no progress for the timeout."""
+        timeout = self.options.timeout_s
+        for ref, task in list(self.running.items()):
+            mine = self.attempts.get(task.key, [])[task.seen:]
+            if not mine or mine[-1]["idle"] < timeout:
+                continue
+            self.cancelled[mine[-1]["token"]] = f"hung: no progress for {timeout:g} s, cancelled"
+            self.ray.cancel(ref, force=True)
+            del self.running[ref]
+            if len(self.attempts[task.key]) >= self.allowed:
+                raise self.give_up(task, f"no progress for {timeout:g} s (hung)",
+                                   len(self.attempts[task.key]))
+            self.submit(task)
+
+    def run(self, bar: Bar) -> ScaleoutReport:
+        ray, shown = self.ray, 0
+        try:
+            while self.waiting or self.running:
+                while self.waiting and len(self.running) < (self.options.workers or
+                                                            len(self.tasks)):
+                    self.submit(self.waiting.popleft())
+                ready, _ = ray.wait(list(self.running), num_returns=1, timeout=POLL_S)
+                others = [r for r in self.running if r not in ready]
+                if ready and others:  # and whatever else is finished by now
+                    ready += ray.wait(others, num_returns=len(others), timeout=0)[0]
+                self.attempts = ray.get(self.tracker.poll.remote())
+                done = sum(v[-1]["done"] for v in self.attempts.values())
+                bar.update(done - shown)
+                shown = done
+                for ref in ready:
+                    self.collect(ref)
+                self.cancel_hung()
+            self.attempts = ray.get(self.tracker.poll.remote())
+            for task in self.tasks:  # reasons that reached the tracker after the task's result
+                if task.key in self.report.retried:
+                    self.record(task)
+            return self.report
+        finally:
+            for ref in self.running:  # failed or interrupted: stop the rest before cleaning up
+                ray.cancel(ref, force=True)
+            if self.running:
+                ray.wait(list(self.running), num_returns=len(self.running), timeout=10)
+
+
+def drive(ray: Any, remote_fn: Any, tasks: list[_Task], options: RayOptions, bar: Bar,
           what: str) -> ScaleoutReport:
     """Run ``tasks`` on Ray with retries and hang detection; feed ``bar``; fail in one line."""
-    tracker = _tracker(ray)
-    allowed = options.retries + 1
-    waiting: deque[_Task] = deque(tasks)
-    running: dict[Any, _Task] = {}
-    cancelled: dict[str, str] = {}
-    report = ScaleoutReport(tasks=len(tasks))
-    attempts: dict[str, list[dict[str, Any]]] = {}
-    shown = 0
-
-    def submit(task: _Task) -> None:
-        task.seen = len(attempts.get(task.key, ()))
-        task.max_retries = allowed - 1 - task.seen
-        ref = remote_fn.options(max_retries=task.max_retries).remote(*task.args, tracker)
-        running[ref] = task
-
-    def give_up(task: _Task, reason: str, n: int) -> Sc2DataError:
-        return Sc2DataError(f"{what} of {task.key} failed after {n} attempt(s) (retries: "
-                            f"{options.retries}): {reason}; rerun the same command to resume")
-
-    def record(task: _Task) -> None:
-        tries = attempts.get(task.key, [])
-        if len(tries) > 1:
-            report.retried[task.key] = _outcomes(tries, cancelled)
-
-    try:
-        while waiting or running:
-            while waiting and len(running) < (options.workers or len(tasks)):
-                submit(waiting.popleft())
-            ready, _ = ray.wait(list(running), num_returns=1, timeout=POLL_S)
-            others = [r for r in running if r not in ready]
-            if ready and others:  # and whatever else is finished by now
-                ready += ray.wait(others, num_returns=len(others), timeout=0)[0]
-            attempts = ray.get(tracker.poll.remote())
-            done = sum(v[-1]["done"] for v in attempts.values())
-            bar.update(done - shown)
-            shown = done
-            for ref in ready:
-                task = running.pop(ref)
-                try:
-                    result = ray.get(ref)
-                except ray.exceptions.TaskCancelledError:
-                    continue  # we cancelled it as hung; already resubmitted or failed
-                except ray.exceptions.RayTaskError as e:
-                    cause = e.cause if e.cause is not None else e
-                    if not isinstance(cause, transient_errors()):
-                        raise Sc2DataError(f"{what} of {task.key} failed: "
-                                           f"{describe(cause)}") from None
-                    raise give_up(task, f"the instance crashed: {describe(cause)}",
-                                  task.seen + task.max_retries + 1) from None
-                except ray.exceptions.RayError as e:  # Ray retried it as often as allowed
-                    raise give_up(task, _system_failure(ray, e),
-                                  task.seen + task.max_retries + 1) from None
-                report.results[task.key] = result.get("rows")
-                report.peak_rss_mb = max(report.peak_rss_mb, result["rss_mb"])
-                report.peak_children_rss_mb = max(report.peak_children_rss_mb,
-                                                  result["children_rss_mb"])
-                record(task)
-            for ref, task in list(running.items()):
-                mine = attempts.get(task.key, [])[task.seen:]
-                if not mine or mine[-1]["idle"] < options.timeout_s:
-                    continue
-                reason = f"hung: no progress for {options.timeout_s:g} s, cancelled"
-                cancelled[mine[-1]["token"]] = reason
-                ray.cancel(ref, force=True)
-                del running[ref]
-                if len(attempts[task.key]) >= allowed:
-                    raise give_up(task, f"no progress for {options.timeout_s:g} s (hung)",
-                                  len(attempts[task.key]))
-                submit(task)
-        attempts = ray.get(tracker.poll.remote())
-        for task in tasks:  # reasons that reached the tracker after the task's result
-            if task.key in report.retried:
-                record(task)
-        return report
-    finally:
-        for ref in running:  # failed or interrupted: stop the rest before cleaning up
-            ray.cancel(ref, force=True)
-        if running:
-            ray.wait(list(running), num_returns=len(running), timeout=10)
+    return _Driver(ray, remote_fn, tasks, options, what).run(bar)
 
 
 # -- the two stages -------------------------------------------------------------------------------
@@ -325,8 +358,9 @@ class RayShards:
         self.options = options
         self.report = ScaleoutReport()
 
-    def __call__(self, config: Any, out: Path, todo: list[int], env_factory: Any,
-                 agent_factory: Any, bar: Any) -> dict[int, list[dict[str, Any]]]:
+    def __call__(self, config: RolloutConfig, out: Path, todo: list[int],
+                 env_factory: EnvFactory, agent_factory: AgentFactory, bar: Bar
+                 ) -> dict[int, list[dict[str, Any]]]:
         from sc2data.data.dataset import shard_name
         from sc2data.files import PARTIAL
         from sc2data.provenance import versions
@@ -346,9 +380,10 @@ class RayShards:
         return {i: self.report.results[shard_name(i)] for i in todo}
 
 
-def rollout_on_ray(config: Any, out: str | os.PathLike[str], options: RayOptions,
-                   progress: bool | None = None, env_factory: Any = None,
-                   agent_factory: Any = None) -> tuple[Any, ScaleoutReport]:
+def rollout_on_ray(config: RolloutConfig, out: str | os.PathLike[str], options: RayOptions,
+                   progress: bool | None = None, env_factory: EnvFactory | None = None,
+                   agent_factory: AgentFactory | None = None
+                   ) -> tuple[RolloutSummary, ScaleoutReport]:
     """``sc2data rollout --ray``: :func:`sc2data.data.rollout.rollout` with shards as Ray tasks.
 
     Checks the settings and the folder before it starts or joins Ray; resumable as locally.
@@ -374,12 +409,12 @@ def rollout_on_ray(config: Any, out: str | os.PathLike[str], options: RayOptions
 class RayUnits:
     """A unit runner for :func:`sc2data.labels.label.label`: label units as Ray tasks."""
 
-    def __init__(self, options: RayOptions, data: Path, selection: tuple[Any, Any, Any]) -> None:
+    def __init__(self, options: RayOptions, data: Path, selection: Selection) -> None:
         self.options, self.data, self.selection = options, data, selection
         self.report = ScaleoutReport()
 
-    def __call__(self, todo: Sequence[tuple[Any, Path]], keys: Sequence[str], batch_size: int,
-                 bar: Any) -> None:
+    def __call__(self, todo: Sequence[tuple[Unit, Path]], keys: Sequence[str], batch_size: int,
+                 bar: Bar) -> None:
         if not todo:
             return
         ray = require_ray()
@@ -394,7 +429,7 @@ class RayUnits:
 def label_on_ray(data: str | os.PathLike[str], options: RayOptions, *,
                  include: Sequence[str] | None = None, exclude: Sequence[str] = (),
                  rules_dir: Path | str | None = None, batch_size: int = 256,
-                 progress: bool | None = None) -> tuple[Any, ScaleoutReport]:
+                 progress: bool | None = None) -> tuple[LabelSummary, ScaleoutReport]:
     """``sc2data label --ray``: :func:`sc2data.labels.label.label_dataset` with units as Ray tasks."""
     from sc2data.labels.label import label_dataset
 

@@ -3,7 +3,7 @@
 The frames look like the real game's where it matters to storage: mostly constant planes (height,
 visibility, creep, power), a base, eight mineral fields, SCVs shuttling between them, buildings
 that appear and grow hit points, marines walking off, a selection that changes, categorical ids
-and uint16 hit points, all drawn by brief §3's screen geometry. They are *not* a game: nothing
+and uint16 hit points, all drawn by the real screen geometry (24 world units across). They are *not* a game: nothing
 here obeys BuildMarines' rules (that is :mod:`sc2data.game.sim`'s job). :class:`SyntheticEnv` serves
 them through pysc2's ``environment.Base`` so the rollout loop runs on them unchanged.
 """
@@ -20,7 +20,7 @@ from sc2data._pysc2 import environment, features, units
 from sc2data.schema import MINIMAP_SIZE, SCREEN_SIZE, Schema
 
 _K = SCREEN_SIZE / 24.0
-"""Screen pixels per world unit (brief §3)."""
+"""Screen pixels per world unit (the screen spans 24 world units)."""
 _SCR = features.SCREEN_FEATURES
 _MM = features.MINIMAP_FEATURES
 _MINERALS = ((23, 28.5), (24, 29.5), (23, 26.5), (25, 22.5), (25, 32.5), (24, 23.5), (24, 31.5),

@@ -1,11 +1,11 @@
 """A small synthetic pair set in the exact pair-set folder format, for tests and benchmarks.
 
 It stands in for ``sc2data pair`` output where no rollout exists (tests, the trainer benchmark):
-two-frame stacks drawn with BuildMarines' geometry (brief §3) and pysc2's own unit ids, where each
+two-frame stacks drawn with BuildMarines' geometry and pysc2's own unit ids, where each
 labelled stack carries the one event its command names between frame 0 and frame 1 — a depot or a
 barracks blob appears, an SCV appears by the Command Center, a marine by a barracks, minerals rise
 by 5 — and null stacks carry only the background motion every stack has (SCVs wander, the selection
-changes). Pairs follow the pair-set contract (/work/notes/PAIRSET.md): per labelled state one
+changes). Pairs follow the pair-set contract (docs/pairset.md): per labelled state one
 matched and one mismatched pair, per null state one null pair; splits are episode-disjoint.
 """
 
@@ -40,7 +40,7 @@ COMMANDS: tuple[dict[str, object], ...] = (
 _T = units.Terran
 _HP = {_T.SCV: 45, _T.Marine: 45, _T.CommandCenter: 1500, _T.SupplyDepot: 400,
        _T.Barracks: 1000, units.Neutral.MineralField: 0}
-_K = 64 / 24  # screen pixels per world unit (brief §3)
+_K = 64 / 24  # screen pixels per world unit (24 world units across)
 
 
 @dataclass

@@ -6,6 +6,7 @@ import json
 import shutil
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +14,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from sc2data.data.dataset import open_dataset
+from sc2data.errors import Sc2DataError
 from sc2data.pairs.packed import PackedSplit
 from sc2data.vocab import SPLITS
 
@@ -136,3 +138,17 @@ def test_pair_names_a_command_the_labels_lack(built: Path, tmp_path: Path) -> No
     (tmp_path / "r.toml").write_text(text)
     p = run("pair", tmp_path / "r.toml", "--data", built / "rollout", ok=False)
     assert p.returncode == 2 and "have no rule build_factory" in p.stderr
+
+
+def test_recipe_text_must_be_the_rules_command(tmp_path: Path) -> None:
+    """labels.parquet records the rule's command, pairs.parquet the recipe's text: they agree."""
+    from sc2data.pairs.pairset import check_texts
+    from sc2data.recipe import parse
+
+    recipe = parse(tomllib.loads(RECIPE.replace('text = "train a marine"',
+                                                'text = "train a soldier"')), "t.toml")
+    rules = {c.id: c.text for c in recipe.commands} | {"train_marine": "train a marine"}
+    with pytest.raises(Sc2DataError, match="command train_marine has text 'train a soldier', but "
+                                           "rule train_marine says 'train a marine'"):
+        check_texts(recipe, rules)
+    check_texts(recipe, rules | {"train_marine": "train a soldier"})  # agreeing: no error

@@ -5,7 +5,8 @@ exceptions, same messages, including its lenient range check that only rejects n
 values), so an agent that works here fails or succeeds the same way on ``SC2Env``.
 ``available_actions`` follows ``features.Features.available_actions``: pysc2's always-available
 UI functions plus the general functions of the abilities on the selection's command cards, the
-cards cut down as BuildMarines cuts them (brief §3). What each function then does is in
+cards cut down as BuildMarines cuts them (SCV: gather, return, depot, barracks; CC: SCV, rally;
+Barracks: marine; Marine: move, stop, hold, attack, patrol). What each function then does is in
 :mod:`sc2data.game.sim.handlers`.
 """
 

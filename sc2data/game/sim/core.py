@@ -10,7 +10,7 @@ game loops or units. The rules themselves live in three subclasses that
 :mod:`~sc2data.game.sim.building` (construction and production) and :mod:`~sc2data.game.sim.combat`;
 :class:`GameCore` declares the hooks it calls on them.
 
-Numbers come from :mod:`sc2data.game.sim.mapdata` (brief §3–4). Simplifications, each chosen because
+Numbers come from :mod:`sc2data.game.sim.mapdata` (the map file and StarCraft II's game data). Simplifications, each chosen because
 BuildMarines never exercises the difference: units move in straight lines and do not collide or
 path around structures (a structure placed on units leaves them where they stand); the
 ``queued`` (shift) flag of commands is ignored (a queued command replaces the current one, so a
@@ -68,7 +68,7 @@ class GameCore(abc.ABC):
     # ------------------------------------------------------------------ set-up
 
     def reset(self) -> None:
-        """A fresh episode: the map's start state, workers sent to mine (brief §3)."""
+        """A fresh episode: the map's start state, workers sent to mine."""
         self.loop = 0
         self.table = UnitTable()
         self.units: dict[int, Unit] = {}

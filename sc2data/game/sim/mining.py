@@ -1,6 +1,6 @@
 """Mining: workers gather from mineral fields and carry 5 minerals a trip to the CC.
 
-A field is mined by one worker at a time for ``HARVEST_LOOPS`` (≈44.6 loops, brief §4), then
+A field is mined by one worker at a time for ``HARVEST_LOOPS`` (≈44.6 loops in LotV), then
 needs ``PATCH_CLEAR_LOOPS`` before the next; others wait their turn. Workers sent to a field that
 already has two spread to the nearest field with fewer, as the game's workers bounce. Each leg
 between field and CC takes distance / SCV speed plus the calibrated ``MINING_LEG_OVERHEAD``.

@@ -1,7 +1,7 @@
 """Drawing the 27 screen and 11 minimap feature layers, and assembling pysc2's observation.
 
-Units are filled disks of radius ``unit radius × px per unit`` sampled at pixel centres (brief
-§3), structures under ground units. A frame is drawn as one "top unit" image (which unit is on
+Units are filled disks of radius ``unit radius × px per unit`` sampled at pixel centres (as
+the real game draws them at 64×64: an SCV or marine is a 2×2 square), structures under ground units. A frame is drawn as one "top unit" image (which unit is on
 top at each pixel); every per-unit layer is then a lookup ``table[top]``. Structures and mineral
 fields never move, so their pixels are stamped once per change of the footprint grid; only
 ground units are stamped every frame, all in one vectorised pass.

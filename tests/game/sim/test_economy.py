@@ -1,4 +1,4 @@
-"""Mining against the brief's real-game traces (§3): first minerals and income per loop."""
+"""Mining against real-game traces of the same Terran start: first minerals and income per loop."""
 
 from __future__ import annotations
 

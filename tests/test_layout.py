@@ -1,0 +1,68 @@
+"""The package's layout holds: imports flow one way, from the shared ground up through the stages.
+
+Ground (root modules) ← game ← data ← labels ← pairs ← model, with scale-out and testing helpers
+beside the top and the CLI, the build driver and the package's lazy public API above all. A module
+may import its own level or lower ones, never a higher one — at module level or inside a function
+(only imports for type checking are exempt).
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parents[1] / "sc2data"
+LEVELS = {"game": 1, "data": 2, "labels": 3, "pairs": 4, "model": 5, "rl": 6, "scaleout": 6,
+          "testing": 6}
+TOP = {"cli", "build", "__init__"}
+"""Root modules that sit above every stage (everything else at the root is shared ground)."""
+
+
+def level(module: str) -> int:
+    """The level of ``sc2data.X[.…]``: 0 for shared ground, 7 for the top."""
+    parts = module.split(".")
+    if len(parts) == 1:
+        return 7
+    if parts[1] in LEVELS:
+        return LEVELS[parts[1]]
+    return 7 if parts[1] in TOP else 0
+
+
+def imports(path: Path) -> list[tuple[int, str]]:
+    """(line, module) of every ``sc2data`` import outside ``if TYPE_CHECKING:`` blocks."""
+    tree = ast.parse(path.read_text())
+    skip: set[int] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+            skip |= {id(n) for n in ast.walk(node)}
+    found = []
+    for node in ast.walk(tree):
+        if id(node) in skip:
+            continue
+        if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("sc2data"):
+            if node.module == "sc2data":  # `from sc2data import dataset`: submodules by name
+                found += [(node.lineno, f"sc2data.{a.name}") for a in node.names]
+            else:
+                found.append((node.lineno, node.module))
+        elif isinstance(node, ast.Import):
+            found += [(node.lineno, a.name) for a in node.names if a.name.startswith("sc2data")]
+    return found
+
+
+def test_imports_never_go_upward() -> None:
+    upward = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        rel = path.relative_to(PACKAGE.parent).with_suffix("")
+        me = ".".join(rel.parts)
+        mine = level(me)
+        for line, target in imports(path):
+            if target == "sc2data" or target.startswith("sc2data.rules"):
+                continue
+            if level(target) > mine:
+                upward.append(f"{rel}.py:{line} imports {target}")
+    assert not upward, "\n".join(upward)
+
+
+def test_levels_name_every_subpackage() -> None:
+    subpackages = {p.parent.name for p in PACKAGE.glob("*/__init__.py")}
+    assert subpackages <= set(LEVELS), subpackages - set(LEVELS)

@@ -200,6 +200,22 @@ def _check_dataset(shard: Shard, name: str, length: int) -> list[str]:
     return []
 
 
+def check_shard(path: Path, manifest: dict[str, Any]) -> list[str]:
+    """Every fault of one shard on its own (no index to compare with): its header, schema and
+    settings against ``manifest``, its tables, and every chunk read through its checksum."""
+    try:
+        table = Shard(path)
+    except Sc2DataError as e:
+        return [str(e)]
+    try:
+        eps = table.episodes
+    finally:
+        table.close()
+    rows: dict[str, Any] = {c: list(eps[c]) for c in eps}
+    rows["shard_sha256"] = []
+    return _check_shard(path, rows, manifest, "")
+
+
 def verify(folder: Path) -> list[str]:
     """Every fault found in ``folder`` (empty: intact). Unreadable basics raise Sc2DataError."""
     manifest = read_manifest(folder)

@@ -24,10 +24,13 @@ from typing import Any
 import numpy as np
 
 from sc2data._pysc2 import base_agent, environment
+from sc2data.data.audit import check_shard
 from sc2data.data.chunks import Codec
 from sc2data.data.dataset import (
+    INDEX,
     MANIFEST,
     keep_freed_memory,
+    read_index,
     read_manifest,
     shard_name,
     write_index,
@@ -278,21 +281,56 @@ def prepare_folder(config: RolloutConfig, out: Path) -> list[int]:
             shutil.rmtree(stale)
         else:
             stale.unlink()
+    recorded = _recorded_hashes(out)
     todo = []
     for i in range(config.n_shards):
         path = out / shard_name(i)
         if not path.exists():
             todo.append(i)
             continue
-        shard = Shard(path)
-        try:
-            recorded = shard.attrs.get("settings")
-        finally:
-            shard.close()
-        if recorded != config.settings():
-            raise Sc2DataError(f"{path} was written with other settings; delete it (or the "
-                               f"folder) and rerun")
+        check_kept(config, path, i, recorded.get(path.name))
     return todo
+
+
+def _recorded_hashes(out: Path) -> dict[str, str]:
+    """Each shard's sha256 as the index recorded it when the shard was written (none before the
+    first run finished)."""
+    if not (out / INDEX).is_file():
+        return {}
+    index = read_index(out)
+    return dict(zip(index.column("shard").to_pylist(), index.column("shard_sha256").to_pylist()))
+
+
+def check_kept(config: RolloutConfig, path: Path, i: int, recorded_sha256: str | None) -> None:
+    """A shard a resumed rollout keeps must be the one it wrote: shard ``i``'s episodes with
+    these settings, and the bytes the index recorded (or, for a shard the index does not list
+    yet, intact throughout: every chunk read through its checksum). Never the other way round:
+    what is on disk is not taken as the new truth."""
+    def refuse(why: str) -> Sc2DataError:
+        return Sc2DataError(f"{path} {why}; delete it and rerun to roll it out again")
+
+    try:
+        shard = Shard(path)
+    except Sc2DataError as e:
+        raise refuse(f"is not a complete shard ({e})") from None
+    try:
+        attrs = {k: shard.attrs.get(k) for k in ("settings", "episode_start", "episode_stop")}
+    finally:
+        shard.close()
+    span = config.shard_episodes(i)
+    if attrs["settings"] != config.settings():
+        raise refuse("was written with other settings")
+    if (attrs["episode_start"], attrs["episode_stop"]) != (span.start, span.stop):
+        raise refuse(f"holds episodes {attrs['episode_start']}–{attrs['episode_stop']}, not "
+                     f"{span.start}–{span.stop} (a shard copied over another?)")
+    if recorded_sha256 is not None:
+        if sha256_file(path) != recorded_sha256:
+            raise refuse(f"does not match the sha256 {INDEX} recorded when it was written "
+                         f"(damaged or replaced)")
+        return
+    faults = check_shard(path, manifest_for(config))
+    if faults:
+        raise refuse(f"is damaged ({faults[0]})")
 
 
 def _fail_fast(config: RolloutConfig, env_factory: EnvFactory,

@@ -16,7 +16,7 @@ import pyarrow as pa
 from sc2data.errors import Sc2DataError
 from sc2data.labels.registry import Registered, call, check_output
 from sc2data.labels.source import Batches, Unit
-from sc2data.labels.store import FORMAT_VERSION, write_table
+from sc2data.labels.store import FORMAT_VERSION, write_sums, write_table
 from sc2data.schema import Schema
 
 
@@ -101,6 +101,12 @@ def write_part(unit: Unit, rules: Sequence[Registered], keys: Sequence[str], bat
                path: Path, on_batch: Callable[[int], None] | None = None) -> None:
     """Label one unit and write its part atomically at ``path``."""
     write_table(label_batches(unit.batches(batch_size, keys), rules, on_batch=on_batch), path)
+    write_sums(part_sums(path), [path])
+
+
+def part_sums(part: Path) -> Path:
+    """Where a label part's sha256 is recorded (a resumed run keeps only intact parts)."""
+    return part.with_name(part.name + ".sha256")
 
 
 def pc_sum(col: pa.ChunkedArray) -> int:

@@ -30,6 +30,7 @@ from sc2data.labels.apply import (
     label_batches,
     long_form,
     null_multi,
+    part_sums,
     pc_sum,
     required_keys,
     write_part,
@@ -41,8 +42,9 @@ from sc2data.labels.store import (
     LABELS_FILE,
     META_KEY,
     STACKS_FILE,
+    check_sums,
     read_meta,
-    write_table,
+    write_labels,
 )
 from sc2data.progress import Bar
 
@@ -135,7 +137,7 @@ def _run(source: Source, rules: Sequence[Registered], out: Path, fp: str, batch_
     names = [_part_name(u.key) for u in source.units]
     if len(set(names)) != len(names):
         raise Sc2DataError("the dataset's shards do not have unique keys; cannot label it")
-    finished = {n for n in names if (parts / n).is_file()}
+    finished = {n for n in names if _intact(parts / n)}
     total = sum(u.stacks for u in source.units)
     with progress_bar(total, desc="label", unit="stack", show=progress) as bar:
         bar.update(sum(u.stacks for u, n in zip(source.units, names) if n in finished))
@@ -162,10 +164,23 @@ def _run(source: Source, rules: Sequence[Registered], out: Path, fp: str, batch_
         "versions": versions(),
     }
     # The per-stack table first, the long one last: read_labels checks they belong together.
-    write_table(wide, out / STACKS_FILE, meta)
-    write_table(long_form(wide, rules), out / LABELS_FILE, meta)
+    write_labels(out, wide, long_form(wide, rules), meta)
     shutil.rmtree(parts, ignore_errors=True)
     return _summary(out, meta, resumed=len(finished))
+
+
+def _intact(part: Path) -> bool:
+    """A finished part whose bytes are those recorded when it was written; a damaged one (and its
+    record) is removed, so the unit is labelled again."""
+    if not part.is_file():
+        return False
+    try:
+        check_sums(part_sums(part), "")
+        return True
+    except Sc2DataError:
+        part.unlink(missing_ok=True)
+        part_sums(part).unlink(missing_ok=True)
+        return False
 
 
 def _summary(out: Path, meta: dict[str, Any], resumed: int = 0,

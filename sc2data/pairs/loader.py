@@ -23,6 +23,7 @@ import pyarrow.parquet as pq
 
 from sc2data.errors import Sc2DataError
 from sc2data.formats import PAIRSET
+from sc2data.pairs.layout import META_FILE, PAIRS_FILE, check_content, packed_path
 from sc2data.pairs.packed import BLOCK, PackedSplit
 from sc2data.schema import Schema, SchemaError
 
@@ -54,9 +55,10 @@ class PairSet:
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         if not self.path.is_dir():
-            raise Sc2DataError(f"{self.path} is not a pair-set folder (it does not exist); "
-                               f"build one with sc2data build RECIPE --out DIR")
-        meta_path = self.path / "pairset.json"
+            why = "it is a file" if self.path.exists() else "it does not exist"
+            raise Sc2DataError(f"{self.path} is not a pair-set folder ({why}); build one with "
+                               f"sc2data build RECIPE --out DIR")
+        meta_path = self.path / META_FILE
         try:
             self.meta: dict[str, Any] = json.loads(meta_path.read_text())
         except FileNotFoundError:
@@ -74,11 +76,12 @@ class PairSet:
             raise Sc2DataError(f"{meta_path}: {e}") from None
         except (KeyError, TypeError) as e:
             raise Sc2DataError(f"{meta_path} lacks the field {e}; rebuild the pair set") from None
+        check_content(self.path, self.fingerprint)
         self.recipe_name = str(self.meta.get("recipe_name", "pairs"))
         self._table = self._read_pairs()
 
     def _read_pairs(self) -> dict[str, SplitPairs]:
-        path = self.path / "pairs.parquet"
+        path = self.path / PAIRS_FILE
         try:
             table = pq.read_table(path)
         except FileNotFoundError:
@@ -105,7 +108,7 @@ class PairSet:
 
     def packed(self, split: str) -> PackedSplit:
         """Open ``packed/<split>.h5``, checking it matches the pair set's schema and rows."""
-        path = self.path / "packed" / f"{split}.h5"
+        path = packed_path(self.path, split)
         if not path.is_file():
             raise Sc2DataError(f"{self.path} lacks packed/{split}.h5; rerun sc2data pair")
         p = PackedSplit(path)

@@ -25,14 +25,20 @@ from sc2data.errors import Sc2DataError
 from sc2data.files import PARTIAL, fsync_path, publish, sha256_files
 from sc2data.formats import PAIRSET
 from sc2data.pairs.draw import Labelled, build_pairs
+from sc2data.pairs.layout import (
+    META_FILE,
+    PACKED_DIR,
+    PAIRS_FILE,
+    check_content,
+    content_files,
+    packed_path,
+)
 from sc2data.pairs.packed import PackedWriter
 from sc2data.progress import Bar
 from sc2data.provenance import versions
 from sc2data.recipe import Recipe
 from sc2data.vocab import SPLITS
 
-PAIRS_FILE = "pairs.parquet"
-META_FILE = "pairset.json"
 READ_BATCH = 1024
 """Stacks read from the rollout shards per call while packing."""
 
@@ -93,9 +99,10 @@ def labelled_stacks(recipe: Recipe, data: Path) -> tuple[Labelled, dict[str, Any
 
 
 def _identity(recipe: Recipe, labels_meta: dict[str, Any]) -> dict[str, Any]:
-    """What decides a pair set's content: the recipe and the labels it was drawn from."""
-    identity = {"recipe": recipe.to_dict(), "labels": labels_meta.get("fingerprint"),
-                "labels_created": labels_meta.get("created")}
+    """What decides a pair set's content: the recipe and the labels it was drawn from (their
+    fingerprint: the same rules' code on the same shards, so the same labels; never when they
+    were made, so a relabel with identical content keeps the pair set)."""
+    identity = {"recipe": recipe.to_dict(), "labels": labels_meta.get("fingerprint")}
     return json.loads(json.dumps(identity))  # as it reads back from pairset.json
 
 
@@ -105,9 +112,16 @@ def _existing(out: Path, identity: dict[str, Any]) -> dict[str, Any] | None:
         return None
     try:
         meta = json.loads(meta_path.read_text())
-    except (OSError, json.JSONDecodeError):
+    except (OSError, ValueError):
         return None
-    return meta if meta.get("identity") == identity else None
+    if not isinstance(meta, dict) or meta.get("identity") != identity:
+        return None
+    try:
+        check_content(out, str(meta.get("fingerprint")))
+    except Sc2DataError:  # ours, but damaged: rebuilt from scratch
+        shutil.rmtree(out)
+        return None
+    return meta
 
 
 def _pack_split(ds: Dataset, split: str, pairs: pa.Table, path: Path, seed: int,
@@ -163,7 +177,7 @@ def make_pairset(recipe: Recipe, data: str | os.PathLike[str], out: str | os.Pat
     ds = open_dataset(data)
     tmp = out.with_name(f".{out.name}{PARTIAL}")
     shutil.rmtree(tmp, ignore_errors=True)
-    (tmp / "packed").mkdir(parents=True)
+    (tmp / PACKED_DIR).mkdir(parents=True)
     try:
         parts, states = [], {}
         n_states = len(np.unique(pc.add(pc.multiply(pairs["episode"], 1 << 20),
@@ -171,7 +185,7 @@ def make_pairset(recipe: Recipe, data: str | os.PathLike[str], out: str | os.Pat
         with progress_bar(n_states, desc="pack", unit="stack", show=progress) as bar:
             for split in SPLITS:
                 sub = pairs.filter(pc.equal(pairs["split"], split))
-                part, states[split] = _pack_split(ds, split, sub, tmp / "packed" / f"{split}.h5",
+                part, states[split] = _pack_split(ds, split, sub, packed_path(tmp, split),
                                                   recipe.seed, bar)
                 parts.append(part)
         table = pa.concat_tables(parts)
@@ -180,7 +194,7 @@ def make_pairset(recipe: Recipe, data: str | os.PathLike[str], out: str | os.Pat
         for s, k in zip(table["split"].to_pylist(), table["kind"].to_pylist()):
             counts.setdefault(s, {}).setdefault(k, 0)
             counts[s][k] += 1
-        files = [tmp / PAIRS_FILE] + [tmp / "packed" / f"{s}.h5" for s in SPLITS]
+        files = content_files(tmp)
         meta = {
             **PAIRSET.header(),
             "recipe_name": recipe.name, "seed": recipe.seed, "recipe": recipe.to_dict(),

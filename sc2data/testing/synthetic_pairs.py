@@ -11,7 +11,6 @@ matched and one mismatched pair, per null state one null pair; splits are episod
 
 from __future__ import annotations
 
-import hashlib
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,6 +20,8 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from sc2data._pysc2 import features, units
+from sc2data.formats import PAIRSET
+from sc2data.pairs.layout import fingerprint
 from sc2data.pairs.packed import PackedWriter
 from sc2data.schema import Schema, StackBatch
 
@@ -229,16 +230,13 @@ def write_pairset(out: str | Path, states_per_command: int = 40, null_states: in
         "kind": pa.array(rows["kind"], pa.string()), "label": pa.array(rows["label"], pa.string()),
     })
     pq.write_table(table, out / "pairs.parquet")
-    h = hashlib.sha256()
-    for p in [out / "pairs.parquet"] + sorted((out / "packed").glob("*.h5")):
-        h.update(p.read_bytes())
     meta = {
-        "format": "sc2data.pairset", "format_version": 1,
+        **PAIRSET.header(),
         "recipe": {"name": "synthetic", "states_per_command": states_per_command,
                    "null_states": null_states, "episodes": episodes},
         "recipe_name": "synthetic", "seed": seed, "schema": schema.to_dict(),
         "commands": [dict(c) for c in commands], "splits": counts,
-        "fingerprint": h.hexdigest(), "versions": {},
+        "fingerprint": fingerprint(out), "versions": {},
     }
     (out / "pairset.json").write_text(json.dumps(meta, indent=2))
     return out

@@ -192,3 +192,48 @@ def test_ctrl_c_stops_cleanly_and_the_rerun_finishes(tmp_path: Path) -> None:
     assert not list(out.glob("*.partial")) and not (out / INDEX).exists()
     main([*run, "--out", str(out)])  # the same command, with one worker
     assert verify(out) == []
+
+
+def _small(out: Path) -> RolloutConfig:
+    config = RolloutConfig(env="sim", agent="reduced-random", episodes=2, episodes_per_shard=1,
+                           max_steps=12, seed=3)
+    rollout(config, out, workers=1, progress=False)
+    return config
+
+
+def test_resume_refuses_a_shard_changed_since_the_index_recorded_it(tmp_path: Path) -> None:
+    """A byte changed in a finished dataset's shard is not kept and re-hashed into the index."""
+    from tests.data.test_storage import flip_byte_in_chunk
+
+    out = tmp_path / "d"
+    config = _small(out)
+    index_before = (out / INDEX).read_bytes()
+    flip_byte_in_chunk(out / "shard-00001.h5", "screen/unit_type", chunk=0)
+    with pytest.raises(Sc2DataError, match=r"shard-00001.h5 does not match the sha256 "
+                                           r"index.parquet recorded .*; delete it and rerun"):
+        rollout(config, out, workers=1, progress=False)
+    assert (out / INDEX).read_bytes() == index_before
+
+
+def test_resume_refuses_a_shard_copied_over_another(tmp_path: Path) -> None:
+    out = tmp_path / "d"
+    config = _small(out)
+    (out / "shard-00000.h5").replace(out / "shard-00001.h5")
+    (out / INDEX).unlink()  # as if interrupted before the index was written
+    with pytest.raises(Sc2DataError, match=r"holds episodes 0–1, not 1–2 \(a shard copied"):
+        rollout(config, out, workers=1, progress=False)
+
+
+def test_resume_checks_unindexed_shards_through_their_checksums(tmp_path: Path) -> None:
+    """Shards of an interrupted run (no index yet) are read whole before they are kept."""
+    from tests.data.test_storage import flip_byte_in_chunk
+
+    out = tmp_path / "d"
+    config = _small(out)
+    (out / INDEX).unlink()
+    flip_byte_in_chunk(out / "shard-00000.h5", "screen/unit_type", chunk=0)
+    with pytest.raises(Sc2DataError, match=r"shard-00000.h5 is damaged \(.*unreadable chunk"):
+        rollout(config, out, workers=1, progress=False)
+    (out / "shard-00000.h5").unlink()  # the remedy the message gives
+    rollout(config, out, workers=1, progress=False)
+    assert verify(out) == []

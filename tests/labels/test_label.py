@@ -19,7 +19,7 @@ from sc2data.files import PARTIAL, FolderLock
 from sc2data.labels.label import PARTS_DIR, label
 from sc2data.labels.registry import Registered, RuleError, load_registry, load_rules_dir
 from sc2data.labels.source import Source, Unit
-from sc2data.labels.store import LABELS_FILE, STACKS_FILE, read_labels, read_meta
+from sc2data.labels.store import LABELS_FILE, STACKS_FILE, SUMS_FILE, read_labels, read_meta
 from sc2data.rulebase import (
     SCREEN_PX_PER_UNIT,
     blank_frame,
@@ -237,7 +237,7 @@ def test_mismatched_files_are_refused(tmp_path: Path) -> None:
     label(source(), RULES, tmp_path / "a", progress=False)
     label(source(), RULES[:2], tmp_path / "b", progress=False)
     (tmp_path / "b" / STACKS_FILE).replace(tmp_path / "a" / STACKS_FILE)
-    with pytest.raises(Sc2DataError, match="come from different runs"):
+    with pytest.raises(Sc2DataError, match="stack_labels.parquet is damaged or was replaced"):
         read_labels(tmp_path / "a")
     with pytest.raises(Sc2DataError, match="no labels in"):
         read_meta(tmp_path / "c")
@@ -413,3 +413,48 @@ def test_label_unit_reloads_for_a_new_run_in_a_long_lived_process(tmp_path: Path
         assert label_dataset(data, progress=False, run_units=in_this_process).stacks == 120
         fingerprints.append(read_meta(data)["dataset"]["fingerprint"])
     assert fingerprints[0] != fingerprints[1]
+
+
+def _flip(path: Path, at: int) -> None:
+    with open(path, "r+b") as f:
+        f.seek(at)
+        b = f.read(1)
+        f.seek(at)
+        f.write(bytes([b[0] ^ 0xFF]))
+
+
+def test_damaged_label_file_is_an_error_and_a_rerun_relabels(tmp_path: Path) -> None:
+    """Flipped bytes in stack_labels.parquet: never "up to date", never read as labels."""
+    label(source(), RULES, tmp_path, progress=False)
+    reference = pq.read_table(tmp_path / STACKS_FILE)
+    _flip(tmp_path / STACKS_FILE, 40)
+    with pytest.raises(Sc2DataError, match=r"stack_labels.parquet is damaged .*; rerun sc2data "
+                                           r"label"):
+        read_labels(tmp_path)
+    calls: list = []
+    again = label(source(calls=calls), RULES, tmp_path, progress=False)
+    assert not again.up_to_date and len(calls) == 3
+    assert read_labels(tmp_path).stacks.equals(reference)
+
+
+def test_labels_without_their_checksums_are_refused(tmp_path: Path) -> None:
+    label(source(), RULES, tmp_path, progress=False)
+    (tmp_path / SUMS_FILE).unlink()
+    with pytest.raises(Sc2DataError, match=r"labels.sha256 is missing"):
+        read_labels(tmp_path)
+
+
+def test_a_damaged_part_is_labelled_again_on_resume(tmp_path: Path) -> None:
+    reference = tmp_path / "ref"
+    label(source(), RULES, reference, progress=False)
+    out = tmp_path / "out"
+    broken = Source([make_unit(0), make_unit(1, fail_at=7), make_unit(2)], Schema.paper(),
+                    {"path": "hand-built", "fingerprint": "abc"})
+    with pytest.raises(KeyboardInterrupt):
+        label(broken, RULES, out, batch_size=7, progress=False)
+    (part,) = (out / PARTS_DIR).glob("*.parquet")
+    _flip(part, part.stat().st_size // 2)
+    calls: list = []
+    summary = label(source(calls=calls), RULES, out, progress=False)
+    assert [e for e, _ in calls] == [0, 1, 2] and summary.resumed_units == 0
+    assert read_labels(out).stacks.equals(read_labels(reference).stacks)

@@ -15,6 +15,7 @@ pytest.importorskip("torch")
 
 import sc2data.pairs.loader as loader_mod  # noqa: E402
 from sc2data.model.evaluate import evaluate  # noqa: E402
+from sc2data.pairs.layout import fingerprint
 from sc2data.pairs.loader import PairLoader, PairSet  # noqa: E402
 from tests.cli import assert_one_line_error, run_cli
 from tests.mem_helpers import tiny_pairset, train_tiny  # noqa: E402
@@ -131,14 +132,28 @@ def _broken(data: Path, tmp_path: Path, what: str) -> Path:
         t = t.set_column(t.column_names.index("command"), "command",
                          pa.array(["qqzx vvkw"] * t.num_rows))
         pq.write_table(t, bad / "pairs.parquet")
+        meta = json.loads((bad / "pairset.json").read_text())  # a consistent pair set
+        meta["fingerprint"] = fingerprint(bad)
+        (bad / "pairset.json").write_text(json.dumps(meta))
+    elif what == "flipped":
+        with open(bad / "packed" / "train.h5", "r+b") as f:  # one byte, late in the file
+            f.seek(-100, 2)
+            b = f.read(1)
+            f.seek(-100, 2)
+            f.write(bytes([b[0] ^ 1]))
+    elif what == "file":
+        bad = tmp_path / "a-file"
+        bad.write_text("x")
     return bad
 
 
 @pytest.mark.parametrize("what, needles", [
     ("missing", ["does not exist"]),
     ("json", ["pairset.json", "not valid JSON"]),
-    ("parquet", ["pairs.parquet", "not a readable Parquet"]),
+    ("parquet", ["pairs.parquet", "damaged or was replaced"]),
+    ("flipped", ["damaged or was replaced", "rerun sc2data pair"]),
     ("packed", ["packed/val.h5"]),
+    ("file", ["a-file is not a pair-set folder (it is a file)"]),
     ("text", ["'qqzx vvkw'", "no word in the model's vocabulary"]),
 ])
 def test_cli_bad_data_is_a_one_line_error(what: str, needles: list[str], data: Path,

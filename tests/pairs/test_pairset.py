@@ -152,3 +152,33 @@ def test_recipe_text_must_be_the_rules_command(tmp_path: Path) -> None:
                                            "rule train_marine says 'train a marine'"):
         check_texts(recipe, rules)
     check_texts(recipe, rules | {"train_marine": "train a soldier"})  # agreeing: no error
+
+
+def test_damaged_pair_set_is_rebuilt_not_up_to_date(built: Path, tmp_path: Path) -> None:
+    """A flipped byte in a packed split: pair rebuilds it (no "up to date" beside a trainer that
+    refuses it), equal to the original."""
+    recipe = recipe_file(tmp_path, episodes="3", states_per_command="3", null_states="12")
+    out = tmp_path / "a"
+    shutil.copytree(built / "pairs", out)
+    good = (out / "packed" / "train.h5").read_bytes()
+    with open(out / "packed" / "train.h5", "r+b") as f:
+        f.seek(-64, 2)
+        b = f.read(1)
+        f.seek(-64, 2)
+        f.write(bytes([b[0] ^ 1]))
+    p = run("pair", recipe, "--data", built / "rollout", "--out", out, "--no-progress")
+    assert "up to date" not in p.stdout
+    assert (out / "packed" / "train.h5").read_bytes() == good
+
+
+def test_relabel_with_identical_content_keeps_the_pair_set(built: Path, tmp_path: Path) -> None:
+    """The pair set is tied to the labels' content, not to when they were made."""
+    recipe = recipe_file(tmp_path, episodes="3", states_per_command="3", null_states="12")
+    data = tmp_path / "rollout"
+    shutil.copytree(built / "rollout", data)
+    run("pair", recipe, "--data", data, "--out", tmp_path / "a", "--no-progress")
+    for name in ("labels.parquet", "stack_labels.parquet", "labels.sha256"):
+        (data / name).unlink()
+    run("label", data, "--no-progress")
+    p = run("pair", recipe, "--data", data, "--out", tmp_path / "a", "--no-progress")
+    assert "up to date" in p.stdout

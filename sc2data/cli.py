@@ -310,11 +310,12 @@ def evaluate_cmd(
     run: Path = typer.Argument(..., help="Run folder (sc2data train --out)."),
     data: Optional[Path] = typer.Option(None, help="Pair-set folder [default: the run's]."),
     device: str = typer.Option("auto", help="auto, cpu or cuda."),
+    allow_unfinished: bool = typer.Option(False, help="Evaluate a run that did not finish."),
 ) -> None:
     """Accuracy (beside the paper's), ROC-AUC, retrieval, paraphrases; writes RUN/eval.json."""
     from sc2data.model.evaluate import evaluate, format_report
 
-    report = evaluate(run, data, device)
+    report = evaluate(run, data, device, allow_unfinished)
     typer.echo(format_report(report))
     typer.echo(f"wrote {Path(run) / 'eval.json'}")
 
@@ -328,11 +329,12 @@ def tsne_cmd(
     text: list[str] = typer.Option([], "--text", help="Extra command text to mark (repeatable)."),
     seed: int = typer.Option(0, help="Seed of the sample and of t-SNE."),
     device: str = typer.Option("auto", help="auto, cpu or cuda."),
+    allow_unfinished: bool = typer.Option(False, help="Draw a run that did not finish."),
 ) -> None:
     """A t-SNE map of state and command embeddings, like the paper's Fig. 3."""
     from sc2data.model.evaluate import tsne
 
-    typer.echo(f"wrote {tsne(run, data, out, states, seed, text, device)}")
+    typer.echo(f"wrote {tsne(run, data, out, states, seed, text, device, allow_unfinished)}")
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -83,10 +83,10 @@ def _grouped(d: np.ndarray, target: np.ndarray, groups: np.ndarray, thr: float
 
 
 def evaluate(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None,
-             device: str = "auto") -> dict[str, Any]:
+             device: str = "auto", allow_unfinished: bool = False) -> dict[str, Any]:
     """Compute every metric for ``run`` on its pair set (or ``data``); write RUN/eval.json."""
     run = Path(run)
-    scorer = load_model(run, device)
+    scorer = load_model(run, device, allow_unfinished=allow_unfinished)
     pairset = _pairset(scorer, data)
     thr = scorer.threshold
     ids = [str(c["id"]) for c in pairset.commands]
@@ -205,7 +205,7 @@ def format_report(report: dict[str, Any]) -> str:
 
 def tsne(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None,
          out: str | os.PathLike[str] | None = None, states: int = 2000, seed: int = 0,
-         texts: Sequence[str] = (), device: str = "auto") -> Path:
+         texts: Sequence[str] = (), device: str = "auto", allow_unfinished: bool = False) -> Path:
     """Plot test-state and command embeddings in one t-SNE map (the paper's Fig. 3) as a PNG."""
     import matplotlib
 
@@ -213,7 +213,7 @@ def tsne(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None
     import matplotlib.pyplot as plt
 
     run = Path(run)
-    scorer = load_model(run, device)
+    scorer = load_model(run, device, allow_unfinished=allow_unfinished)
     pairset = _pairset(scorer, data)
     split = "test" if len(pairset.pairs("test")) else "val"
     pairs = pairset.pairs(split)

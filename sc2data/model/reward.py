@@ -106,8 +106,12 @@ def pairwise(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.linalg.norm(a[:, None, :] - b[None, :, :], axis=-1)
 
 
-def load_model(run: str | os.PathLike[str], device: str = "cpu") -> MEMScorer:
-    """Load ``RUN/best.pt`` (or a checkpoint file) as a :class:`MEMScorer` on ``device``."""
+def load_model(run: str | os.PathLike[str], device: str = "cpu", *,
+               allow_unfinished: bool = False) -> MEMScorer:
+    """Load ``RUN/best.pt`` (or a checkpoint file) as a :class:`MEMScorer` on ``device``.
+
+    A run folder is checked first: finished (unless ``allow_unfinished``) and its checkpoint the
+    bytes training wrote (``state.json``)."""
     try:
         import torch  # noqa: F401
     except ImportError:
@@ -118,6 +122,9 @@ def load_model(run: str | os.PathLike[str], device: str = "cpu") -> MEMScorer:
     if not path.exists():
         raise Sc2DataError(f"run folder {path} does not exist; pass the --out of sc2data train")
     if path.is_dir():
+        from sc2data.model.train import check_run
+
+        check_run(path, allow_unfinished=allow_unfinished)
         path = path / "best.pt"
     dev = resolve_device(device)
     model, meta = load_checkpoint(path, dev)

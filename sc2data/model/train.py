@@ -9,7 +9,11 @@ matrices, categorical embeddings — and not of biases or the frozen word vector
 once per batch, not scaled by the batch size. "Validation loss" is the data term alone.
 
 RUN receives ``config.json`` (this config, the model's architecture, the data's fingerprint, the
-word vectors' source and digest, versions), ``metrics.jsonl`` (one line per epoch) and ``best.pt``.
+word vectors' source and digest, versions), ``metrics.jsonl`` (one line per epoch), ``best.pt``,
+``last.pt`` (the state to resume from: model, optimiser, random generators) and ``state.json``
+(epochs done, finished or not, and every run file's sha256, so a damaged file is caught where it is
+read). One run at a time per folder; an interrupted run resumes from its last finished epoch when
+the same command is run again, to the result an uninterrupted run gives.
 """
 
 from __future__ import annotations
@@ -26,11 +30,16 @@ from typing import Any
 import numpy as np
 
 from sc2data.errors import MissingDependencyError, Sc2DataError
+from sc2data.files import LOCK, FolderLock, atomic_file, sha256_file, write_atomic
 from sc2data.model.words import load_word_vectors
 from sc2data.pairs.loader import PairLoader, PairSet
 from sc2data.provenance import versions
 
-RUN_FILES = ("config.json", "metrics.jsonl", "best.pt", "eval.json", "tsne.png")
+RUN_FILES = ("config.json", "metrics.jsonl", "best.pt", "last.pt", "state.json", "eval.json",
+             "tsne.png")
+STATE_FILE = "state.json"
+RESUME_IGNORES = ("out", "overwrite", "progress", "name")
+"""Config fields that may differ between an interrupted run and the rerun that resumes it."""
 
 
 @dataclass
@@ -115,120 +124,215 @@ def train(cfg: TrainConfig) -> Path:
 
     # --- model: input channels and categorical tables from the data's schema
     train_split, val_split = data.packed("train"), data.packed("val")
-    run = _prepare_run(Path(cfg.out or Path("runs") / cfg.name), cfg.overwrite)
-    mcfg = M.ModelConfig(categorical=cfg.categorical, pool=cfg.pool,  # type: ignore[arg-type]
-                         conv=M.conv_for(cfg.pool))
-    big = [l.key for l in data.schema.layers if l.categorical and l.scale > mcfg.max_table]
-    tables = M.value_tables(data.schema, (b for _, b in train_split.blocks(keys=big)) if big
-                            else [], mcfg.max_table)
-    model = M.MEM(data.schema, tables, words.vectors, mcfg).to(device)
-    keys = model.state.keys()
-    optimizer = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=cfg.lr)
+    run = _make_run_folder(Path(cfg.out or Path("runs") / cfg.name))
+    with FolderLock(run, "train"):
+        resumed = _prepare_run(run, cfg)  # under the lock: another train cannot be writing
+        mcfg = M.ModelConfig(categorical=cfg.categorical, pool=cfg.pool,  # type: ignore[arg-type]
+                             conv=M.conv_for(cfg.pool))
+        big = [l.key for l in data.schema.layers if l.categorical and l.scale > mcfg.max_table]
+        tables = M.value_tables(data.schema, (b for _, b in train_split.blocks(keys=big)) if big
+                                else [], mcfg.max_table)
+        model = M.MEM(data.schema, tables, words.vectors, mcfg).to(device)
+        keys = model.state.keys()
+        optimizer = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=cfg.lr)
 
-    # in the loader's thread: a CPU gets inputs packed in numpy, a GPU raw pinned stacks
-    transform = None if cuda else model.state.pack
-    collate = lambda rows: M.to_tensors(rows, pin=cuda)  # noqa: E731
+        # in the loader's thread: a CPU gets inputs packed in numpy, a GPU raw pinned stacks
+        transform = None if cuda else model.state.pack
+        collate = lambda rows: M.to_tensors(rows, pin=cuda)  # noqa: E731
 
-    def loader(split: str, packed: Any, shuffle: bool) -> PairLoader:
-        p = splits[split]
-        return PairLoader(packed, p.state, np.array([text_of[t] for t in p.command], np.int64),
-                          p.target, cfg.batch_size, keys, shuffle, cfg.seed, cfg.window,
-                          transform=transform, collate=collate)
+        def loader(split: str, packed: Any, shuffle: bool) -> PairLoader:
+            p = splits[split]
+            return PairLoader(packed, p.state, np.array([text_of[t] for t in p.command], np.int64),
+                              p.target, cfg.batch_size, keys, shuffle, cfg.seed, cfg.window,
+                              transform=transform, collate=collate)
 
-    train_loader = loader("train", train_split, True)
-    val_loader = loader("val", val_split, False)
+        train_loader = loader("train", train_split, True)
+        val_loader = loader("val", val_split, False)
 
-    config = {**asdict(cfg), "model": asdict(mcfg), "run": str(run),
-              "data_fingerprint": data.fingerprint, "recipe_name": data.recipe_name,
-              "vectors_source": words.source, "vectors_digest": words.digest(),
-              "vocab": len(words.words), "word_dim": words.dim, "device_used": str(device),
-              "threads_used": torch.get_num_threads(),
-              "torch": str(torch.__version__), "machine": platform.platform(),
-              "parameters": sum(p.numel() for p in model.parameters() if p.requires_grad),
-              "versions": versions()}
-    (run / "config.json").write_text(json.dumps(config, indent=2))
-    config = json.loads(json.dumps(config))  # plain types only: best.pt loads with weights_only
+        config = {**asdict(cfg), "model": asdict(mcfg), "run": str(run),
+                  "data_fingerprint": data.fingerprint, "recipe_name": data.recipe_name,
+                  "vectors_source": words.source, "vectors_digest": words.digest(),
+                  "vocab": len(words.words), "word_dim": words.dim, "device_used": str(device),
+                  "threads_used": torch.get_num_threads(),
+                  "torch": str(torch.__version__), "machine": platform.platform(),
+                  "parameters": sum(p.numel() for p in model.parameters() if p.requires_grad),
+                  "versions": versions()}
+        if resumed is None:
+            write_atomic(run / "config.json", json.dumps(config, indent=2).encode())
+        config = json.loads(json.dumps(config))  # plain types only: best.pt loads with weights_only
 
-    def step(batch: Any, train: bool) -> torch.Tensor:
-        """One batch; returns (Σ squared error, correct, pairs) as a tensor on the device, so
-        that a GPU is synchronised only when the progress bar or the epoch reads it."""
-        x = M.to_device(batch.arrays, device)
-        if cuda:  # packing runs on the GPU
-            x = model.state.pack_torch(x)
-        target = torch.from_numpy(batch.target).to(device, non_blocking=cuda)
-        which = torch.from_numpy(batch.text).to(device, non_blocking=cuda)
-        with torch.autocast(device.type, dtype=torch.bfloat16, enabled=cfg.amp and cuda):
-            d = model(x, ids_t, lengths_t, which).float()
-        mse = ((d - target) ** 2).mean()
-        if train:
-            loss = mse + cfg.l2 * model.l2() if cfg.l2 else mse
-            optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            optimizer.step()
-        correct = ((d < M.THRESHOLD) == (target < 0.5)).sum()
-        return torch.stack([mse.detach() * len(batch), correct.float(),
-                            torch.tensor(float(len(batch)), device=device)])
+        def step(batch: Any, train: bool) -> torch.Tensor:
+            """One batch; returns (Σ squared error, correct, pairs) as a tensor on the device, so
+            that a GPU is synchronised only when the progress bar or the epoch reads it."""
+            x = M.to_device(batch.arrays, device)
+            if cuda:  # packing runs on the GPU
+                x = model.state.pack_torch(x)
+            target = torch.from_numpy(batch.target).to(device, non_blocking=cuda)
+            which = torch.from_numpy(batch.text).to(device, non_blocking=cuda)
+            with torch.autocast(device.type, dtype=torch.bfloat16, enabled=cfg.amp and cuda):
+                d = model(x, ids_t, lengths_t, which).float()
+            mse = ((d - target) ** 2).mean()
+            if train:
+                loss = mse + cfg.l2 * model.l2() if cfg.l2 else mse
+                optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                optimizer.step()
+            correct = ((d < M.THRESHOLD) == (target < 0.5)).sum()
+            return torch.stack([mse.detach() * len(batch), correct.float(),
+                                torch.tensor(float(len(batch)), device=device)])
 
-    best = float("inf")
-    with open(run / "metrics.jsonl", "w") as log:
-        for epoch in range(1, cfg.epochs + 1):
-            model.train()
-            t0, c0, acc = time.perf_counter(), time.process_time(), torch.zeros(3, device=device)
-            bar = tqdm(train_loader.epoch(epoch), total=len(train_loader), unit="batch",
-                       desc=f"epoch {epoch}/{cfg.epochs}", disable=not cfg.progress, leave=False)
-            for i, batch in enumerate(bar):
-                acc += step(batch, True)
-                if cfg.progress and i % 20 == 0:
-                    e, c, n = acc.tolist()
-                    bar.set_postfix(loss=f"{e / n:.4f}", acc=f"{c / n:.3f}",
-                                    pairs_s=f"{n / (time.perf_counter() - t0):.0f}")
-            sums = acc.tolist()
-            seconds, cpu_seconds = time.perf_counter() - t0, time.process_time() - c0
-            model.eval()
-            vacc, v0 = torch.zeros(3, device=device), time.perf_counter()
-            with torch.no_grad():
-                for batch in val_loader.epoch(0):
-                    vacc += step(batch, False)
-            vsums = vacc.tolist()
-            val_seconds = time.perf_counter() - v0
-            with torch.no_grad():
-                l2 = float(model.l2())
-            val_loss = float(vsums[0] / vsums[2]) if vsums[2] else float("nan")
-            row = {"epoch": epoch, "train_loss": float(sums[0] / sums[2]),
-                   "train_acc": float(sums[1] / sums[2]), "l2": l2, "val_loss": val_loss,
-                   "val_acc": float(vsums[1] / vsums[2]) if vsums[2] else float("nan"),
-                   "pairs_per_s": float(sums[2] / seconds), "seconds": seconds,
-                   "cpu_seconds": cpu_seconds,
-                   "val_seconds": val_seconds}
-            # without validation pairs, the last epoch is kept
-            row["best"] = bool(val_loss < best) if vsums[2] else True
-            if row["best"]:
-                best = val_loss if vsums[2] else best
-                M.save_checkpoint(run / "best.pt", model, words.words, {
-                    "config": config, "epoch": epoch, "val_loss": val_loss,
-                    "vectors_source": words.source, "vectors_digest": words.digest(),
-                    "data_fingerprint": data.fingerprint, "commands": data.commands})
-            log.write(json.dumps(row) + "\n")
-            log.flush()
-            if cfg.progress:
-                tqdm.write(f"epoch {epoch:>3}  train loss {row['train_loss']:.4f} acc "
-                           f"{row['train_acc']:.2%}  val loss {val_loss:.4f} acc "
-                           f"{row['val_acc']:.2%}  {row['pairs_per_s']:.0f} pairs/s"
-                           + ("  *" if row["best"] else ""))
+        # --- resuming: the model, optimiser and generators as the last finished epoch left them
+        best, first = float("inf"), 1
+        if resumed is not None:
+            last = torch.load(run / "last.pt", map_location="cpu", weights_only=False)
+            model.load_state_dict(last["model"])
+            optimizer.load_state_dict(last["optimizer"])
+            torch.set_rng_state(last["torch_rng"])
+            np.random.set_state(last["numpy_rng"])
+            random.setstate(last["python_rng"])
+            best, first = last["best"], last["epoch"] + 1
+            _keep_rows(run / "metrics.jsonl", last["epoch"])
+        with open(run / "metrics.jsonl", "a") as log:
+            for epoch in range(first, cfg.epochs + 1):
+                model.train()
+                t0, c0, acc = time.perf_counter(), time.process_time(), torch.zeros(3, device=device)
+                bar = tqdm(train_loader.epoch(epoch), total=len(train_loader), unit="batch",
+                           desc=f"epoch {epoch}/{cfg.epochs}", disable=not cfg.progress, leave=False)
+                for i, batch in enumerate(bar):
+                    acc += step(batch, True)
+                    if cfg.progress and i % 20 == 0:
+                        e, c, n = acc.tolist()
+                        bar.set_postfix(loss=f"{e / n:.4f}", acc=f"{c / n:.3f}",
+                                        pairs_s=f"{n / (time.perf_counter() - t0):.0f}")
+                sums = acc.tolist()
+                seconds, cpu_seconds = time.perf_counter() - t0, time.process_time() - c0
+                model.eval()
+                vacc, v0 = torch.zeros(3, device=device), time.perf_counter()
+                with torch.no_grad():
+                    for batch in val_loader.epoch(0):
+                        vacc += step(batch, False)
+                vsums = vacc.tolist()
+                val_seconds = time.perf_counter() - v0
+                with torch.no_grad():
+                    l2 = float(model.l2())
+                val_loss = float(vsums[0] / vsums[2]) if vsums[2] else float("nan")
+                row = {"epoch": epoch, "train_loss": float(sums[0] / sums[2]),
+                       "train_acc": float(sums[1] / sums[2]), "l2": l2, "val_loss": val_loss,
+                       "val_acc": float(vsums[1] / vsums[2]) if vsums[2] else float("nan"),
+                       "pairs_per_s": float(sums[2] / seconds), "seconds": seconds,
+                       "cpu_seconds": cpu_seconds,
+                       "val_seconds": val_seconds}
+                # without validation pairs, the last epoch is kept
+                row["best"] = bool(val_loss < best) if vsums[2] else True
+                if row["best"]:
+                    best = val_loss if vsums[2] else best
+                    M.save_checkpoint(run / "best.pt", model, words.words, {
+                        "config": config, "epoch": epoch, "val_loss": val_loss,
+                        "vectors_source": words.source, "vectors_digest": words.digest(),
+                        "data_fingerprint": data.fingerprint, "commands": data.commands})
+                log.write(json.dumps(row) + "\n")
+                log.flush()
+                os.fsync(log.fileno())
+                with atomic_file(run / "last.pt") as tmp:
+                    torch.save({"epoch": epoch, "best": best, "model": model.state_dict(),
+                                "optimizer": optimizer.state_dict(),
+                                "torch_rng": torch.get_rng_state(),
+                                "numpy_rng": np.random.get_state(),
+                                "python_rng": random.getstate()}, tmp)
+                _write_state(run, epoch, cfg.epochs)
+                if cfg.progress:
+                    tqdm.write(f"epoch {epoch:>3}  train loss {row['train_loss']:.4f} acc "
+                               f"{row['train_acc']:.2%}  val loss {val_loss:.4f} acc "
+                               f"{row['val_acc']:.2%}  {row['pairs_per_s']:.0f} pairs/s"
+                               + ("  *" if row["best"] else ""))
     for s in (train_split, val_split):
         s.close()
     return run
 
 
-def _prepare_run(run: Path, overwrite: bool) -> Path:
-    """Create the run folder; a non-empty one is refused unless ``overwrite``."""
+def _make_run_folder(run: Path) -> Path:
+    """Create the run folder (and its parents), or say in one line why it cannot be."""
     if run.exists() and not run.is_dir():
         raise Sc2DataError(f"{run} exists and is not a folder; choose another --out")
-    if run.is_dir() and any(run.iterdir()):
-        if not overwrite:
-            raise Sc2DataError(f"run folder {run} exists and is not empty; choose another --out "
-                               f"or pass --overwrite")
-        for name in RUN_FILES:
-            (run / name).unlink(missing_ok=True)
-    run.mkdir(parents=True, exist_ok=True)
+    try:
+        run.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise Sc2DataError(f"cannot create run folder {run}: {e.strerror or e}; choose another "
+                           f"--out") from None
     return run
+
+
+def _prepare_run(run: Path, cfg: TrainConfig) -> dict[str, Any] | None:
+    """Ready the locked run folder: the state to resume from (an unfinished run of the same
+    config), else None with the folder empty of run files; any other non-empty folder is
+    refused unless ``--overwrite``."""
+    present = [p for p in run.iterdir() if p.name != LOCK]
+    if not present:
+        return None
+    state = read_state(run)
+    if state is not None and not state["finished"] and not cfg.overwrite:
+        old = json.loads((run / "config.json").read_text())
+        new = asdict(cfg)
+        diff = sorted(k for k in new if k not in RESUME_IGNORES and old.get(k) != new[k])
+        if diff:
+            raise Sc2DataError(f"run folder {run} holds an unfinished run with other settings "
+                               f"(differs in: {', '.join(diff)}); rerun it with its own "
+                               f"settings to resume, or pass --overwrite")
+        check_run(run, allow_unfinished=True, files=("config.json", "last.pt", "metrics.jsonl"))
+        return state
+    if not cfg.overwrite:
+        what = "a finished run" if state is not None else "files that are not a resumable run"
+        raise Sc2DataError(f"run folder {run} exists and is not empty (it holds {what}); choose "
+                           f"another --out or pass --overwrite")
+    for name in RUN_FILES:
+        (run / name).unlink(missing_ok=True)
+    return None
+
+
+def _keep_rows(path: Path, n: int) -> None:
+    """Cut ``metrics.jsonl`` to its first ``n`` rows (an epoch logged after the last state)."""
+    rows = path.read_text().splitlines(keepends=True)[:n] if path.is_file() else []
+    write_atomic(path, "".join(rows).encode())
+
+
+def _write_state(run: Path, epoch: int, epochs: int) -> None:
+    """Record progress and every run file's sha256, after the files themselves."""
+    names = [n for n in ("config.json", "metrics.jsonl", "best.pt", "last.pt") if (run / n).exists()]
+    state = {"epochs_done": epoch, "epochs": epochs, "finished": epoch == epochs,
+             "sha256": {n: sha256_file(run / n) for n in names}}
+    write_atomic(run / STATE_FILE, (json.dumps(state, indent=1) + "\n").encode())
+
+
+def read_state(run: Path) -> dict[str, Any] | None:
+    """``state.json`` of a run folder (None if it has none); one-line error if unreadable."""
+    path = run / STATE_FILE
+    if not path.is_file():
+        return None
+    try:
+        state = json.loads(path.read_text())
+        if not isinstance(state, dict) or not isinstance(state.get("sha256"), dict) or \
+                not isinstance(state.get("finished"), bool):
+            raise ValueError("not a run state")
+    except (OSError, ValueError) as e:
+        raise Sc2DataError(f"{path} is unreadable ({e}); train again with --overwrite") from None
+    return state
+
+
+def check_run(run: Path, *, allow_unfinished: bool = False,
+              files: tuple[str, ...] = ("config.json", "best.pt")) -> dict[str, Any]:
+    """One-line error unless ``run`` is a run folder whose ``files`` are the bytes training
+    wrote, and (unless allowed) a finished one. Returns its state."""
+    state = read_state(run)
+    if state is None:
+        raise Sc2DataError(f"{run} has no {STATE_FILE}: not a run of this sc2data, or one "
+                           f"interrupted before its first epoch; train it again")
+    if not state["finished"] and not allow_unfinished:
+        raise Sc2DataError(f"{run} is an unfinished run ({state.get('epochs_done')} of "
+                           f"{state.get('epochs')} epochs); rerun the same sc2data train command "
+                           f"to finish it, or pass --allow-unfinished")
+    for name in files:
+        digest = state["sha256"].get(name)
+        if not (run / name).is_file() or digest is None or sha256_file(run / name) != digest:
+            raise Sc2DataError(f"{run / name} is missing, damaged or was replaced (its sha256 "
+                               f"differs from {STATE_FILE}); train the run again")
+    return state

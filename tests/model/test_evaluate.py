@@ -126,7 +126,7 @@ def test_cli_errors_for_missing_run_foreign_schema_and_bad_data(
     assert_one_line_error(code, err, "run folder", "does not exist")
     (tmp_path / "empty").mkdir()
     code, _, err = run_cli(["evaluate", str(tmp_path / "empty")], capsys)
-    assert_one_line_error(code, err, "best.pt", "does not exist")
+    assert_one_line_error(code, err, "has no state.json")
     import shutil
 
     other = tmp_path / "other"
@@ -134,6 +134,15 @@ def test_cli_errors_for_missing_run_foreign_schema_and_bad_data(
     blob = torch.load(other / "best.pt", weights_only=True)
     blob["schema"]["version"] = 99
     torch.save(blob, other / "best.pt")
+    code, _, err = run_cli(["evaluate", str(other)], capsys)
+    assert_one_line_error(code, err, "best.pt is missing, damaged or was replaced")
+    import json
+
+    from sc2data.files import sha256_file
+
+    state = json.loads((other / "state.json").read_text())  # as if trained so
+    state["sha256"]["best.pt"] = sha256_file(other / "best.pt")
+    (other / "state.json").write_text(json.dumps(state))
     code, _, err = run_cli(["evaluate", str(other)], capsys)
     assert_one_line_error(code, err, "schema version 99")
     code, _, err = run_cli(["evaluate", str(run), "--data", str(tmp_path)], capsys)

@@ -153,7 +153,7 @@ def test_checkpoint_reloads_to_identical_distances(tmp_path: Path) -> None:
     texts = ["build a supply depot", "depot"]
     m.eval()
     before = MEMScorer(m, {"words": WORDS}, torch.device("cpu")).distances(batch, texts)
-    np.testing.assert_array_equal(load_model(tmp_path).distances(batch, texts), before)
+    np.testing.assert_array_equal(load_model(tmp_path / "best.pt").distances(batch, texts), before)
     x = to_tensors(m.state.pack(batch.arrays))
     ids = torch.tensor([[1, 2, 3, 4], [4, 0, 0, 0]])
     with torch.no_grad():
@@ -190,7 +190,7 @@ def test_checkpoint_of_another_schema_version_is_refused(tmp_path: Path) -> None
     blob["schema"]["version"] = 99
     torch.save(blob, tmp_path / "best.pt")
     with pytest.raises(Sc2DataError, match="schema version 99"):
-        load_model(tmp_path)
+        load_model(tmp_path / "best.pt")
     (tmp_path / "best.pt").write_bytes(b"not a checkpoint")
     with pytest.raises(Sc2DataError, match="not a readable checkpoint"):
-        load_model(tmp_path)
+        load_model(tmp_path / "best.pt")

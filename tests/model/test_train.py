@@ -14,6 +14,7 @@ import pytest
 pytest.importorskip("torch")
 
 import sc2data.pairs.loader as loader_mod  # noqa: E402
+from sc2data.errors import Sc2DataError  # noqa: E402
 from sc2data.model.evaluate import evaluate  # noqa: E402
 from sc2data.pairs.layout import fingerprint
 from sc2data.pairs.loader import PairLoader, PairSet  # noqa: E402
@@ -188,3 +189,70 @@ def test_without_torch_the_cli_names_the_extra_to_install(data: Path, tmp_path: 
     monkeypatch.setitem(sys.modules, "torch", None)  # import torch now raises ImportError
     code, _, err = run_cli(["train", str(data), "--out", str(tmp_path / "run")], capsys)
     assert_one_line_error(code, err, "'torch'", "pip install 'sc2data[train]'")
+
+
+def _metrics(run: Path) -> list[dict[str, object]]:
+    keep = ("epoch", "train_loss", "train_acc", "val_loss", "val_acc", "l2", "best")
+    return [{k: r[k] for k in keep} for r in map(json.loads, (run / "metrics.jsonl").open())]
+
+
+def test_interrupted_run_resumes_to_the_uninterrupted_result(
+        data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import torch
+
+    import sc2data.model.train as T
+
+    whole = train_tiny(data, tmp_path / "whole", epochs=3)
+    real = T._write_state
+
+    def stop_after_first(run: Path, epoch: int, epochs: int) -> None:
+        real(run, epoch, epochs)
+        if epoch == 1:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(T, "_write_state", stop_after_first)
+    with pytest.raises(KeyboardInterrupt):
+        train_tiny(data, tmp_path / "cut", epochs=3)
+    monkeypatch.setattr(T, "_write_state", real)
+    state = json.loads((tmp_path / "cut" / "state.json").read_text())
+    assert state["epochs_done"] == 1 and state["finished"] is False
+    with pytest.raises(Sc2DataError, match=r"unfinished run \(1 of 3 epochs\); rerun the same"):
+        evaluate(tmp_path / "cut")  # refused unless asked
+    train_tiny(data, tmp_path / "cut", epochs=3)  # the same call resumes
+    assert _metrics(tmp_path / "cut") == _metrics(whole)
+    a, b = (torch.load(r / "best.pt", weights_only=True)["state_dict"] for r in (whole,
+                                                                              tmp_path / "cut"))
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    with pytest.raises(Sc2DataError, match="holds an unfinished run with other settings "
+                                           r"\(differs in: lr\)"):
+        monkeypatch.setattr(T, "_write_state", stop_after_first)
+        try:
+            train_tiny(data, tmp_path / "cut2", epochs=3)
+        except KeyboardInterrupt:
+            pass
+        monkeypatch.setattr(T, "_write_state", real)
+        train_tiny(data, tmp_path / "cut2", epochs=3, lr=1e-3)
+
+
+def test_damaged_checkpoint_is_refused(data: Path, tmp_path: Path) -> None:
+    run = train_tiny(data, tmp_path / "run", epochs=1)
+    with open(run / "best.pt", "r+b") as f:
+        f.seek(-200, 2)
+        b = f.read(1)
+        f.seek(-200, 2)
+        f.write(bytes([b[0] ^ 1]))
+    with pytest.raises(Sc2DataError, match=r"best.pt is missing, damaged or was replaced"):
+        evaluate(run)
+
+
+def test_two_trains_into_one_folder_do_not_mix(data: Path, tmp_path: Path,
+                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    from sc2data import files
+    from sc2data.files import FolderLock
+
+    monkeypatch.setattr(files, "LOCK_WAIT_S", 0.2)
+    (tmp_path / "run").mkdir()
+    with FolderLock(tmp_path / "run", "train"):  # as a first train holds it
+        with pytest.raises(Sc2DataError, match="another sc2data train is writing to"):
+            train_tiny(data, tmp_path / "run", epochs=1)
+    assert [p.name for p in (tmp_path / "run").iterdir()] == [".lock"]

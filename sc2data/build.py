@@ -14,12 +14,19 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
+from sc2data.errors import Sc2DataError
+from sc2data.files import LOCK, FolderLock
 from sc2data.recipe import Recipe
+
+if TYPE_CHECKING:
+    from sc2data.data.rollout import RolloutConfig
+    from sc2data.scaleout.driver import RayOptions
 
 ROLLOUT_DIR = "rollout"
 PAIRS_DIR = "pairs"
@@ -41,20 +48,42 @@ class BuildReport:
 
 
 def build(recipe: Recipe, out: str | os.PathLike[str], *, workers: int = 1,
-          progress: bool | None = None, ray: Any = None) -> BuildReport:
+          progress: bool | None = None, ray: RayOptions | None = None) -> BuildReport:
     """Run every stage of ``recipe`` into ``out``; stages already complete are kept.
 
     ``ray`` (:class:`sc2data.scaleout.driver.RayOptions`): roll out and label as Ray tasks, on one Ray
     instance or cluster for both stages; the data is the same either way.
     """
-    from sc2data.data.rollout import RolloutConfig, check_folder, rollout
-    from sc2data.labels.label import label_dataset
-    from sc2data.pairs.pairset import make_pairset
+    from sc2data.data.rollout import RolloutConfig
 
     out = Path(out)
     report = BuildReport(out)
     data = out / ROLLOUT_DIR
     config = RolloutConfig.from_recipe(recipe)
+    config.validate()
+    if out.exists() and not out.is_dir():
+        raise Sc2DataError(f"output {out} exists and is not a folder; choose another --out")
+    made = not out.exists()
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise Sc2DataError(f"cannot create {out}: {e.strerror or e}; choose another --out") \
+            from None
+    try:
+        with FolderLock(out, "build"):
+            return _stages(recipe, config, out, data, report, workers, progress, ray)
+    finally:
+        if made and [p.name for p in out.iterdir()] == [LOCK]:  # failed before writing anything
+            shutil.rmtree(out, ignore_errors=True)
+
+
+def _stages(recipe: Recipe, config: RolloutConfig, out: Path, data: Path, report: BuildReport,
+            workers: int, progress: bool | None, ray: RayOptions | None) -> BuildReport:
+    """The three stages, under the build folder's lock."""
+    from sc2data.data.rollout import check_folder, rollout
+    from sc2data.labels.label import label_dataset
+    from sc2data.pairs.pairset import make_pairset
+
     with contextlib.ExitStack() as stack:
         if ray is not None:
             from sc2data.scaleout.driver import connect, label_on_ray, rollout_on_ray

@@ -95,9 +95,12 @@ class FolderLock:
     """
 
     def __init__(self, folder: Path, command: str, *, exclusive: bool = True,
-                 wait_s: float | None = None) -> None:
-        self.folder, self.command = folder, command
-        self._fd = os.open(folder / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
+                 wait_s: float | None = None, name: str = LOCK, what: Path | None = None
+                 ) -> None:
+        """``name``: the lock file in ``folder``; ``what``: the path named in the refusal (a
+        folder that is written whole and renamed into place is locked from beside it)."""
+        self.folder, self.command, self.what = folder, command, what or folder
+        self._fd = os.open(folder / name, os.O_RDWR | os.O_CREAT, 0o644)
         try:
             self._take(fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH,
                        LOCK_WAIT_S if wait_s is None else wait_s)
@@ -123,7 +126,7 @@ class FolderLock:
                 return
             except BlockingIOError:
                 if time.monotonic() >= deadline:
-                    raise Sc2DataError(f"another {self._holder()} is writing to {self.folder}; "
+                    raise Sc2DataError(f"another {self._holder()} is writing to {self.what}; "
                                        f"wait for it to finish or stop it") from None
                 time.sleep(0.05)
 

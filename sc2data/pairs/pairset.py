@@ -22,7 +22,7 @@ import pyarrow.parquet as pq
 
 from sc2data.data.dataset import Dataset
 from sc2data.errors import Sc2DataError
-from sc2data.files import PARTIAL, fsync_path, publish, sha256_files
+from sc2data.files import PARTIAL, FolderLock, fsync_path, publish, sha256_files
 from sc2data.formats import PAIRSET
 from sc2data.pairs.draw import Labelled, build_pairs
 from sc2data.pairs.layout import (
@@ -158,12 +158,29 @@ def _pack_split(ds: Dataset, split: str, pairs: pa.Table, path: Path, seed: int,
 def make_pairset(recipe: Recipe, data: str | os.PathLike[str], out: str | os.PathLike[str], *,
                  progress: bool | None = None) -> PairsetSummary:
     """Build the recipe's pair set from the labelled dataset ``data`` into the folder ``out``."""
-    from sc2data.data.dataset import open_dataset
-    from sc2data.progress import bar as progress_bar
-
     started = time.perf_counter()
     data, out = Path(data), Path(out)
     labelled, labels_meta = labelled_stacks(recipe, data)
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise Sc2DataError(f"cannot create {out}: {e.strerror or e}; choose another --out") \
+            from None
+    # The folder is built beside its final name and renamed into place: locked from beside it.
+    with FolderLock(out.parent, "pair", name=f".{out.name}.lock", what=out):
+        try:
+            return _make(recipe, data, out, labelled, labels_meta, started, progress)
+        except OSError as e:
+            raise Sc2DataError(f"cannot write the pair set {out}: {e.strerror or e}; check the "
+                               f"folder is writable and has space") from None
+
+
+def _make(recipe: Recipe, data: Path, out: Path, labelled: Labelled,
+          labels_meta: dict[str, Any], started: float, progress: bool | None) -> PairsetSummary:
+    """``make_pairset`` under its lock."""
+    from sc2data.data.dataset import open_dataset
+    from sc2data.progress import bar as progress_bar
+
     identity = _identity(recipe, labels_meta)
     done = _existing(out, identity)
     if done is not None:

@@ -325,7 +325,7 @@ def tsne_cmd(
     run: Path = typer.Argument(..., help="Run folder (sc2data train --out)."),
     data: Optional[Path] = typer.Option(None, help="Pair-set folder [default: the run's]."),
     out: Optional[Path] = typer.Option(None, help="PNG path [default: RUN/tsne.png]."),
-    states: int = typer.Option(2000, help="Test states to plot (a random sample)."),
+    states: int = typer.Option(2000, min=1, help="Test states to plot (a random sample)."),
     text: list[str] = typer.Option([], "--text", help="Extra command text to mark (repeatable)."),
     seed: int = typer.Option(0, help="Seed of the sample and of t-SNE."),
     device: str = typer.Option("auto", help="auto, cpu or cuda."),

@@ -31,6 +31,7 @@ wrong type or an impossible count is an error that names the field. Example (the
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
@@ -153,12 +154,37 @@ def _positive(where: str, value: int, allow_zero: bool = False) -> int:
     return value
 
 
+NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
+"""A recipe name: it names folders (``runs/{name}__…``, ``DATA/pairs-{name}``), so it stays one
+plain path component."""
+MAX_EPISODES = 1_000_000
+"""Far beyond any dataset here (the paper's needs 2,400); a typo of a few zeros is an error, not
+a rollout that runs for years."""
+MAX_STATES = 10_000_000
+MAX_TEXT = 200
+"""Characters of a command text or paraphrase: a command, not a document."""
+
+
+def _text(where: str, text: str) -> str:
+    if not text.strip():
+        raise RecipeError(f"{where} must not be empty")
+    if len(text) > MAX_TEXT:
+        raise RecipeError(f"{where} is {len(text):,} characters long; a command text has at "
+                          f"most {MAX_TEXT}")
+    return text
+
+
 def parse(data: Mapping[str, Any], source: str = "<recipe>") -> Recipe:
     """Validate a recipe's TOML tables and build a :class:`Recipe`."""
     w = source
     _check_keys(w, data, {"name": str, "seed": int, "description": str, "rollout": dict,
                           "commands": dict, "pairs": dict, "split": dict},
                 required=("name", "seed", "rollout", "commands", "pairs"))
+    if not NAME.fullmatch(data["name"]) or ".." in data["name"]:
+        raise RecipeError(f"{w}: name {data['name'][:80]!r} must be 1–64 letters, digits, '.', "
+                          f"'_' or '-' (it names folders), starting with a letter or digit")
+    if not 0 <= data["seed"] < 2**63:
+        raise RecipeError(f"{w}: seed must be a non-negative 64-bit integer; got {data['seed']}")
 
     r = data["rollout"]
     _check_keys(f"{w} [rollout]", r, {"env": str, "agent": str, "episodes": int, "layers": str,
@@ -167,6 +193,9 @@ def parse(data: Mapping[str, Any], source: str = "<recipe>") -> Recipe:
     _choice(f"{w} [rollout].env", rollout.env, BACKENDS)
     _choice(f"{w} [rollout].layers", rollout.layers, LAYER_SETS)
     _positive(f"{w} [rollout].episodes", rollout.episodes)
+    if rollout.episodes > MAX_EPISODES:
+        raise RecipeError(f"{w} [rollout].episodes must be at most {MAX_EPISODES:,}; got "
+                          f"{rollout.episodes:,}")
     _positive(f"{w} [rollout].step_mul", rollout.step_mul)
 
     if not data["commands"]:
@@ -180,9 +209,18 @@ def parse(data: Mapping[str, Any], source: str = "<recipe>") -> Recipe:
         paraphrases = c.get("paraphrases", [])
         if not all(isinstance(p, str) and p.strip() for p in paraphrases):
             raise RecipeError(f"{where}.paraphrases must be a list of non-empty strings")
-        if not c["text"].strip():
-            raise RecipeError(f"{where}.text must not be empty")
+        _text(f"{where}.text", c["text"])
+        for p in paraphrases:
+            _text(f"{where}.paraphrases", p)
         commands.append(Command(cid, c["text"], tuple(paraphrases)))
+    seen: dict[str, str] = {}
+    for c in commands:  # one text means one command: a duplicate would be a match and a mismatch
+        for text in (c.text, *c.paraphrases):
+            key = " ".join(text.lower().split())
+            if key in seen:
+                raise RecipeError(f"{w} [commands.{c.id}]: the text {text!r} is also given for "
+                                  f"{seen[key]}; each text names one command once")
+            seen[key] = f"[commands.{c.id}]"
 
     p = data["pairs"]
     _check_keys(f"{w} [pairs]", p, {"states_per_command": int, "null_states": int,
@@ -191,6 +229,9 @@ def parse(data: Mapping[str, Any], source: str = "<recipe>") -> Recipe:
     pairs = PairSpec(**p)
     _positive(f"{w} [pairs].states_per_command", pairs.states_per_command)
     _positive(f"{w} [pairs].null_states", pairs.null_states, allow_zero=True)
+    for field_name in ("states_per_command", "null_states"):
+        if getattr(pairs, field_name) > MAX_STATES:
+            raise RecipeError(f"{w} [pairs].{field_name} must be at most {MAX_STATES:,}")
     _choice(f"{w} [pairs].mismatch", pairs.mismatch, MISMATCH_METHODS)
     if len(commands) < 2:
         raise RecipeError(f"{w} [commands]: mismatched pairs need at least two commands")
@@ -200,7 +241,7 @@ def parse(data: Mapping[str, Any], source: str = "<recipe>") -> Recipe:
                                     "test": (int, float)})
     method = _choice(f"{w} [split].method", s.pop("method", "episode"), SPLIT_METHODS)
     fractions = tuple(float(s.get(k, d)) for k, d in zip(SPLITS, SplitSpec().fractions))
-    if any(f <= 0 for f in fractions) or abs(sum(fractions) - 1.0) > 1e-3:
+    if not all(f > 0 and math.isfinite(f) for f in fractions) or abs(sum(fractions) - 1.0) > 1e-3:
         raise RecipeError(f"{w} [split]: train, val and test must be positive and sum to 1; "
                           f"got {', '.join(f'{f:g}' for f in fractions)}")
     total = sum(fractions)
@@ -241,8 +282,13 @@ def load(path: str | Path) -> Recipe:
     path = Path(path)
     try:
         text = path.read_text()
+    except IsADirectoryError:
+        raise RecipeError(f"recipe {path} is a folder; pass a .toml file") from None
     except OSError as e:
         raise RecipeError(f"cannot read recipe {path}: {e.strerror}") from None
+    except UnicodeDecodeError:
+        raise RecipeError(f"recipe {path} is not a text file (not UTF-8); pass a .toml recipe") \
+            from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:

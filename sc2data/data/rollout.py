@@ -44,7 +44,7 @@ from sc2data.game import env as envs
 from sc2data.progress import Bar
 from sc2data.progress import bar as progress_bar
 from sc2data.provenance import versions
-from sc2data.recipe import Recipe, RolloutSpec
+from sc2data.recipe import MAX_EPISODES, Recipe, RolloutSpec
 from sc2data.schema import Schema
 from sc2data.vocab import BACKENDS, EPISODE_STEPS, LAYER_SETS, MAP_NAME
 from sc2data.workers import run_parallel
@@ -88,6 +88,9 @@ class RolloutConfig(RolloutSpec):
         if self.layers not in LAYER_SETS:
             raise Sc2DataError(f"unknown layer set {self.layers!r}; choose one of: "
                                f"{', '.join(LAYER_SETS)}")
+        if self.episodes > MAX_EPISODES:
+            raise Sc2DataError(f"episodes must be at most {MAX_EPISODES:,}, not "
+                               f"{self.episodes:,}")
         for name in ("episodes", "episodes_per_shard"):
             if getattr(self, name) < 1:
                 raise Sc2DataError(f"{name.replace('_', '-')} must be at least 1, "

@@ -19,6 +19,7 @@ the same command is run again, to the result an uninterrupted run gives.
 from __future__ import annotations
 
 import json
+import math
 import os
 import platform
 import random
@@ -84,6 +85,24 @@ class TrainConfig:
     name: str = field(default="", init=False)
     """Run name ``{recipe}__{seed}__{time}``, set when the run starts."""
 
+    def validate(self) -> None:
+        """One-line error naming the first option no run can use."""
+        for name in ("epochs", "batch_size", "pool", "vocab_size", "window"):
+            if getattr(self, name) < 1:
+                raise Sc2DataError(f"--{name.replace('_', '-')} must be at least 1, not "
+                                   f"{getattr(self, name)}")
+        if not (math.isfinite(self.lr) and self.lr > 0):
+            raise Sc2DataError(f"--lr must be a positive number, not {self.lr}")
+        if not (math.isfinite(self.l2) and self.l2 >= 0):
+            raise Sc2DataError(f"--l2 must be zero or a positive number, not {self.l2}")
+        if self.threads is not None and self.threads < 1:
+            raise Sc2DataError(f"--threads must be at least 1, not {self.threads}")
+        if self.epochs > 100_000:
+            raise Sc2DataError(f"--epochs must be at most 100,000, not {self.epochs:,}")
+        if self.categorical not in ("embed", "onehot", "scalar"):
+            raise Sc2DataError(f"--categorical {self.categorical!r}: choose embed, onehot or "
+                               f"scalar")
+
 
 def train(cfg: TrainConfig) -> Path:
     """Train, keep the best-validation checkpoint, and return the run folder."""
@@ -94,10 +113,7 @@ def train(cfg: TrainConfig) -> Path:
         raise MissingDependencyError("torch", "train", "sc2data train") from None
     from sc2data.model import mem as M
 
-    if cfg.categorical not in ("embed", "onehot", "scalar"):
-        raise Sc2DataError(f"--categorical {cfg.categorical!r}: choose embed, onehot or scalar")
-    if cfg.epochs < 1 or cfg.batch_size < 1 or cfg.lr <= 0 or cfg.pool < 1:
-        raise Sc2DataError("--epochs, --batch-size, --lr and --pool must be positive")
+    cfg.validate()
     data = PairSet(cfg.data)
     cfg.name = f"{data.recipe_name}__{cfg.seed}__{time.strftime('%Y%m%d-%H%M%S')}"
 

@@ -1,0 +1,73 @@
+"""Hostile recipes and options: each is one line naming the field, a non-zero exit, nothing
+written (docs/reliability.md lists what is promised and which test holds it)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from tests.cli import assert_one_line_error, run_cli
+
+ROOT = Path(__file__).resolve().parents[1]
+SMOKE = (ROOT / "manifests" / "smoke.toml").read_text()
+
+
+def _recipe(tmp_path: Path, old: str, new: str) -> Path:
+    assert old in SMOKE, old
+    path = tmp_path / "r.toml"
+    path.write_text(SMOKE.replace(old, new, 1))
+    return path
+
+
+@pytest.mark.parametrize("old, new, needles", [
+    ('name = "smoke"', 'name = "../../x"', ["name '../../x' must be"]),
+    ('name = "smoke"', 'name = "/abs/path"', ["name '/abs/path' must be"]),
+    ('name = "smoke"', f'name = "{"n" * 5000}"', ["must be 1–64 letters"]),
+    ("seed = 0", "seed = -1", ["seed must be a non-negative"]),
+    ("episodes = 20", "episodes = 1000000000000", ["episodes must be at most 1,000,000"]),
+    ("train = 0.666667", "train = nan", ["train, val and test must be positive"]),
+    ('text = "train a marine"', f'text = "{"word " * 20000}"', ["characters long"]),
+    ('paraphrases = ["produce a marine", "make a soldier"]',
+     'paraphrases = ["produce a marine", "build an SCV"]', ["'build an SCV' is also given"]),
+])
+def test_hostile_recipe_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                    old: str, new: str, needles: list[str]) -> None:
+    recipe = _recipe(tmp_path, old, new)
+    code, _, err = run_cli(["build", str(recipe), "--out", str(tmp_path / "out")], capsys)
+    assert_one_line_error(code, err, *needles)
+    assert not (tmp_path / "out").exists()
+
+
+def test_binary_or_folder_recipe_is_one_line(tmp_path: Path,
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "bin.toml").write_bytes(bytes(range(256)) * 4)
+    code, _, err = run_cli(["build", str(tmp_path / "bin.toml"), "--out", str(tmp_path / "o")],
+                           capsys)
+    assert_one_line_error(code, err, "is not a text file")
+    code, _, err = run_cli(["build", str(tmp_path), "--out", str(tmp_path / "o")], capsys)
+    assert_one_line_error(code, err, "is a folder")
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("option, value, needle", [
+    ("--lr", "nan", "--lr must be a positive number"),
+    ("--l2", "-1", "--l2 must be zero or a positive"),
+    ("--threads", "-2", "--threads must be at least 1"),
+    ("--vocab-size", "0", "--vocab-size must be at least 1"),
+    ("--epochs", "0", "--epochs must be at least 1"),
+])
+def test_bad_train_option_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                      option: str, value: str, needle: str) -> None:
+    code, _, err = run_cli(["train", str(tmp_path / "nowhere"), "--out", str(tmp_path / "run"),
+                            option, value], capsys)
+    assert_one_line_error(code, err, needle)
+    assert not (tmp_path / "run").exists()
+
+
+def test_rollout_refuses_absurd_episode_counts(tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    code, _, err = run_cli(["rollout", "--episodes", "1000000000000", "--out",
+                            str(tmp_path / "d")], capsys)
+    assert_one_line_error(code, err, "episodes must be at most 1,000,000")
+    assert not (tmp_path / "d").exists()

@@ -281,17 +281,18 @@ def info(folder: Path = typer.Argument(..., help="Dataset folder.")) -> None:
 
 
 @app.command()
-def verify(folder: Path = typer.Argument(..., help="Dataset folder.")) -> None:
-    """Check every checksum, sha256, schema and the index; exit 1 on any fault."""
-    from sc2data.data.audit import verify as check
+def verify(folder: Path = typer.Argument(..., help="A dataset, pair-set or run folder.")) -> None:
+    """Check every checksum and record of a dataset (and its labels), a pair set or a training
+    run; exit 1 on any fault."""
+    from sc2data.verify import verify_folder
 
-    faults = check(folder)
+    kind, faults, notes = verify_folder(folder)
     for fault in faults:
         typer.echo(f"FAULT {fault}", err=True)
     if faults:
         typer.echo(f"sc2data: {folder}: {len(faults)} fault(s)", err=True)
         raise typer.Exit(1)
-    typer.echo(f"{folder}: OK")
+    typer.echo(f"{folder}: OK ({kind}{'; ' + '; '.join(notes) if notes else ''})")
 
 
 @app.command("train")

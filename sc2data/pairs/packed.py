@@ -125,6 +125,19 @@ class PackedSplit:
             e = min(int(s) + block, self.n)
             yield np.arange(s, e), self.read(int(s), e, keys)
 
+    def check_chunks(self) -> None:
+        """Read every stored chunk through its fletcher32 checksum; one-line error on the first
+        that fails."""
+        for key in self.schema.keys():
+            ds = self._f[key]
+            try:
+                for s in range(0, self.n, BLOCK):
+                    ds[s:s + BLOCK]
+            except OSError as e:
+                raise Sc2DataError(f"{self.path}:{key}: unreadable chunk "
+                                   f"({str(e).strip().splitlines()[0]}); rerun sc2data pair") \
+                    from None
+
     def close(self) -> None:
         self._f.close()
 

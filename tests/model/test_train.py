@@ -256,3 +256,12 @@ def test_two_trains_into_one_folder_do_not_mix(data: Path, tmp_path: Path,
         with pytest.raises(Sc2DataError, match="another sc2data train is writing to"):
             train_tiny(data, tmp_path / "run", epochs=1)
     assert [p.name for p in (tmp_path / "run").iterdir()] == [".lock"]
+
+
+def test_verify_a_run(data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    run = train_tiny(data, tmp_path / "run", epochs=1)
+    code, out, err = run_cli(["verify", str(run)], capsys)
+    assert code == 0 and "OK (training run)" in out, err
+    (run / "metrics.jsonl").write_text("{}\n")
+    code, _, err = run_cli(["verify", str(run)], capsys)
+    assert code == 1 and "metrics.jsonl is missing, damaged or was replaced" in err

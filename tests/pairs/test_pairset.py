@@ -182,3 +182,25 @@ def test_relabel_with_identical_content_keeps_the_pair_set(built: Path, tmp_path
     run("label", data, "--no-progress")
     p = run("pair", recipe, "--data", data, "--out", tmp_path / "a", "--no-progress")
     assert "up to date" in p.stdout
+
+
+def test_verify_covers_dataset_labels_and_pair_set(built: Path, tmp_path: Path) -> None:
+    p = run("verify", built / "rollout")
+    assert "OK (dataset; labels checked)" in p.stdout
+    assert "OK (pair set)" in run("verify", built / "pairs").stdout
+    data = tmp_path / "rollout"
+    shutil.copytree(built / "rollout", data)
+    with open(data / "stack_labels.parquet", "r+b") as f:  # labels damaged: verify says so
+        f.seek(50)
+        b = f.read(1)
+        f.seek(50)
+        f.write(bytes([b[0] ^ 0xFF]))
+    p = run("verify", data, ok=False)
+    assert p.returncode == 1 and "stack_labels.parquet is damaged" in p.stderr
+    pairs = tmp_path / "pairs"
+    shutil.copytree(built / "pairs", pairs)
+    (pairs / "packed" / "val.h5").write_bytes(b"")
+    p = run("verify", pairs, ok=False)
+    assert p.returncode == 1 and "damaged or was replaced" in p.stderr
+    p = run("verify", tmp_path / "nothing-here", ok=False)
+    assert p.returncode == 2 and "not a folder sc2data writes" in p.stderr

@@ -79,6 +79,18 @@ def check_texts(recipe: Recipe, rule_commands: dict[str, str]) -> None:
                                f"recipe and list other wordings as paraphrases")
 
 
+def check_rollout(recipe: Recipe, settings: dict[str, Any], data: Path) -> None:
+    """The data was rolled out as the recipe's ``[rollout]`` says (backend, agent, layers,
+    step_mul): a pair set records the recipe as its provenance, so the claim must be true."""
+    spec = recipe.rollout
+    differ = [f"{k} {settings.get(k)!r} (recipe: {getattr(spec, k)!r})"
+              for k in ("env", "agent", "layers", "step_mul") if settings.get(k) != getattr(spec, k)]
+    if differ:
+        raise Sc2DataError(f"{data} was not rolled out as recipe {recipe.name!r} says: "
+                           f"{'; '.join(differ)}; pair it with a recipe that describes it, or "
+                           f"build the recipe's own data with sc2data build")
+
+
 def labelled_stacks(recipe: Recipe, data: Path) -> tuple[Labelled, dict[str, Any]]:
     """Every stack of ``data`` with the recipe's rules' verdicts, from ``sc2data label``'s files."""
     from sc2data.labels.store import read_labels
@@ -91,6 +103,7 @@ def labelled_stacks(recipe: Recipe, data: Path) -> tuple[Labelled, dict[str, Any
                            f"with: {', '.join(ids)}); relabel with sc2data label {data} --rules "
                            f"{','.join(recipe.rule_ids)}")
     check_texts(recipe, {r["id"]: r["command"] for r in labels.meta["rules"]})
+    check_rollout(recipe, labels.meta.get("dataset", {}).get("settings", {}), data)
     t = labels.stacks
     fires = np.stack([t[c.id].to_numpy(zero_copy_only=False) for c in recipe.commands], axis=1)
     data_labelled = Labelled(t["episode"].to_numpy().astype(np.int64),

@@ -204,3 +204,11 @@ def test_verify_covers_dataset_labels_and_pair_set(built: Path, tmp_path: Path) 
     assert p.returncode == 1 and "damaged or was replaced" in p.stderr
     p = run("verify", tmp_path / "nothing-here", ok=False)
     assert p.returncode == 2 and "not a folder sc2data writes" in p.stderr
+
+
+def test_pair_refuses_a_recipe_whose_rollout_is_not_the_datas(built: Path, tmp_path: Path) -> None:
+    recipe = recipe_file(tmp_path, episodes="3", states_per_command="3", null_states="12",
+                         agent='"scripted"')
+    p = run("pair", recipe, "--data", built / "rollout", "--out", tmp_path / "a", ok=False)
+    assert p.returncode == 2 and "agent 'reduced-random' (recipe: 'scripted')" in p.stderr
+    assert not (tmp_path / "a").exists()

@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from sc2data.errors import Sc2DataError
+from sc2data.files import sha256_file
 from sc2data.schema import Schema, StackBatch
 
 READ_STACKS = 4096
@@ -58,26 +60,36 @@ def dataset_source(path: Path | str) -> Source:
         entry = shards.setdefault(shard, {"sha256": sha, "episodes": []})
         entry["episodes"].append((int(episode), int(n)))
 
-    def reader(episodes: list[tuple[int, int]]) -> Callable[[int, Sequence[str]], Batches]:
+    def reader(name: str, sha256: str, episodes: list[tuple[int, int]]
+               ) -> Callable[[int, Sequence[str]], Batches]:
         ep = np.concatenate([np.full(n, e, np.int64) for e, n in episodes]) if episodes else \
             np.zeros(0, np.int64)
         st = np.concatenate([np.arange(n, dtype=np.int64) for _, n in episodes]) if episodes \
             else np.zeros(0, np.int64)
 
         def batches(batch_size: int, keys: Sequence[str]) -> Batches:
+            # The whole shard is the one the index recorded, even the blocks the rules skip.
+            if sha256_file(Path(path) / name) != sha256:
+                raise Sc2DataError(f"{Path(path) / name} does not match the sha256 the index "
+                                   f"recorded (damaged or replaced); run sc2data verify "
+                                   f"{path}, and roll the shard out again")
             # Read big (chunk decoding amortises), label small (the rules' temporaries stay in
             # cache): sub-batches are views of one read.
             step = max(batch_size, READ_STACKS)
             for i in range(0, len(ep), step):
                 e, s = ep[i:i + step], st[i:i + step]
-                big = ds.read(e, s, keys)
+                try:
+                    big = ds.read(e, s, keys)
+                except OSError as err:
+                    raise Sc2DataError(f"{Path(path) / name} is unreadable ({err}); run sc2data "
+                                       f"verify {path}") from None
                 for j in range(0, len(e), batch_size):
                     part = {k: a[j:j + batch_size] for k, a in big.arrays.items()}
                     yield e[j:j + batch_size], s[j:j + batch_size], StackBatch(part, big.schema)
         return batches
 
     units = [Unit(key=f"{name}:{info['sha256']}", stacks=sum(n for _, n in info["episodes"]),
-                  batches=reader(sorted(info["episodes"])))
+                  batches=reader(name, info["sha256"], sorted(info["episodes"])))
              for name, info in sorted(shards.items())]
     fingerprint = hashlib.sha256(json.dumps(
         [ds.schema.to_dict(), sorted((u.key for u in units))]).encode()).hexdigest()

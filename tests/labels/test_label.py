@@ -28,7 +28,7 @@ from sc2data.rulebase import (
     stack,
 )
 from sc2data.schema import Schema, StackBatch
-from tests.cli import exit_code
+from tests.cli import assert_one_line_error, exit_code, run_cli
 
 BUILTIN = load_registry()
 RULES = list(BUILTIN)
@@ -458,3 +458,21 @@ def test_a_damaged_part_is_labelled_again_on_resume(tmp_path: Path) -> None:
     summary = label(source(calls=calls), RULES, out, progress=False)
     assert [e for e, _ in calls] == [0, 1, 2] and summary.resumed_units == 0
     assert read_labels(out).stacks.equals(read_labels(reference).stacks)
+
+
+def test_label_refuses_a_shard_that_no_longer_matches_its_index(
+        data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Even when the damage is in a block no rule reads, and with --workers 1."""
+    import shutil
+
+    from tests.data.test_storage import flip_byte_in_chunk
+
+    copy = tmp_path / "d"
+    shutil.copytree(data, copy)
+    for name in ("labels.parquet", "stack_labels.parquet", "labels.sha256"):
+        (copy / name).unlink(missing_ok=True)
+    flip_byte_in_chunk(copy / "shard-00000.h5", "screen/height_map")  # no built-in rule reads it
+    code, _, err = run_cli(["label", str(copy), "--workers", "1", "--no-progress"], capsys)
+    assert_one_line_error(code, err, "shard-00000.h5 does not match the sha256 the index "
+                                     "recorded")
+    assert not (copy / "labels.parquet").exists()

@@ -262,6 +262,9 @@ def call(rule: Rule, source: str, batch: Any, where: str = "a synthetic batch") 
     except MissingLayerError as e:
         raise RuleError(f"rule {rule.id!r} from {source} reads data it does not list in requires "
                         f"{tuple(rule.requires)} ({e}) on {where}; add the key to requires") from e
+    except SystemExit as e:  # a rule must answer, not end the run (silently, with its code)
+        raise RuleError(f"rule {rule.id!r} from {source} called sys.exit({e.code!r}) on {where}; "
+                        f"a rule returns a bool array") from None
     except Exception as e:
         raise RuleError(f"rule {rule.id!r} from {source} raised {type(e).__name__}: {e} on "
                         f"{where}") from e

@@ -202,6 +202,7 @@ def misbehaving(tmp_path: Path, body: str) -> list[Registered]:
                                  r"for 7 stacks \(the stacks from episode 0 step 1 to episode 0 "
                                  r"step 7\); a rule must return a \(7,\) bool array$"),
     ("return np.zeros(len(batch))", r"^rule 'late_bloomer' .* returned float64 array"),
+    ("import sys; sys.exit(0)", r"^rule 'late_bloomer' .* called sys.exit\(0\) on the stacks"),
 ])
 def test_rule_failing_on_data_leaves_no_labels(tmp_path: Path, body: str, message: str) -> None:
     out = tmp_path / "data"

@@ -26,8 +26,18 @@ app = typer.Typer(
 )
 
 
+def _print_version(value: bool) -> None:
+    if value:
+        from importlib.metadata import version as package_version
+
+        typer.echo(f"sc2data {package_version('sc2data')}")
+        raise typer.Exit()
+
+
 @app.callback()
-def _root() -> None:
+def _root(show_version: bool = typer.Option(False, "--version", is_eager=True,
+                                            callback=_print_version,
+                                            help="Print sc2data's version and exit.")) -> None:
     """Natural-language commands grounded in StarCraft II BuildMarines game states."""
 
 
@@ -272,9 +282,10 @@ def build(
 
 
 @app.command()
-def info(folder: Path = typer.Argument(..., help="Dataset folder.")) -> None:
-    """Episodes, frames, bytes, the schema and per-shard figures of a dataset."""
-    from sc2data.data.audit import info as report
+def info(folder: Path = typer.Argument(..., help="A dataset, pair-set or run folder.")) -> None:
+    """What a folder holds: a dataset (episodes, bytes, schema, shards, marines, labels per rule),
+    a pair set (pairs per split and kind, commands) or a training run (settings, curves, eval)."""
+    from sc2data.folders import info as report
 
     for line in report(folder):
         typer.echo(line)
@@ -284,7 +295,7 @@ def info(folder: Path = typer.Argument(..., help="Dataset folder.")) -> None:
 def verify(folder: Path = typer.Argument(..., help="A dataset, pair-set or run folder.")) -> None:
     """Check every checksum and record of a dataset (and its labels), a pair set or a training
     run; exit 1 on any fault."""
-    from sc2data.verify import verify_folder
+    from sc2data.folders import verify_folder
 
     kind, faults, notes = verify_folder(folder)
     for fault in faults:

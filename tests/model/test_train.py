@@ -265,3 +265,11 @@ def test_verify_a_run(data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[
     (run / "metrics.jsonl").write_text("{}\n")
     code, _, err = run_cli(["verify", str(run)], capsys)
     assert code == 1 and "metrics.jsonl is missing, damaged or was replaced" in err
+
+
+def test_info_on_a_run(data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    run = train_tiny(data, tmp_path / "run", epochs=2)
+    evaluate(run)
+    code, out, err = run_cli(["info", str(run)], capsys)
+    assert code == 0, err
+    assert "2 of 2 epochs" in out and "val loss" in out and "eval      train" in out

@@ -212,3 +212,14 @@ def test_pair_refuses_a_recipe_whose_rollout_is_not_the_datas(built: Path, tmp_p
     p = run("pair", recipe, "--data", built / "rollout", "--out", tmp_path / "a", ok=False)
     assert p.returncode == 2 and "agent 'reduced-random' (recipe: 'scripted')" in p.stderr
     assert not (tmp_path / "a").exists()
+
+
+def test_info_describes_every_folder(built: Path, tmp_path: Path) -> None:
+    p = run("info", built / "rollout")
+    assert "marines per episode (the game's score, from the index)" in p.stdout
+    assert "build_scv" in p.stdout and "(null)" in p.stdout  # labels per rule
+    p = run("info", built / "pairs")
+    assert "recipe    " in p.stdout and "matched" in p.stdout and "'build an SCV'" in p.stdout
+    p = run("info", tmp_path, ok=False)
+    assert p.returncode == 2 and "not a dataset (sc2data rollout), pair set" in p.stderr
+    assert run("--version").stdout.startswith("sc2data ")

@@ -1,0 +1,191 @@
+"""The folders sc2data writes — a dataset (with its labels), a pair set, a training run — told
+apart by their files, described (``sc2data info``) and checked (``sc2data verify``).
+
+``verify`` checks everything a folder's readers rely on, by content:
+
+* a dataset (``dataset.json``): every shard chunk through its checksum, every shard's sha256
+  against the index, manifest, attributes and tables (:mod:`sc2data.data.audit`), and its labels
+  if it has any (both files against ``labels.sha256``, and that they belong together);
+* a pair set (``pairset.json``): its header, ``pairs.parquet`` and the packed splits against the
+  recorded fingerprint, each split's schema and rows, and every packed chunk through its checksum;
+* a training run (``state.json``): every run file against its recorded sha256, and the checkpoint
+  loads (an unfinished run is reported as such, not as a fault).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from sc2data.errors import Sc2DataError
+
+
+def kind(folder: Path) -> str:
+    """``dataset``, ``pair set`` or ``training run``; a one-line error for anything else."""
+    if not folder.is_dir():
+        why = "it is a file" if folder.exists() else "it does not exist"
+        raise Sc2DataError(f"{folder} is not a folder sc2data writes ({why})")
+    if (folder / "dataset.json").is_file():
+        return "dataset"
+    if (folder / "pairset.json").is_file():
+        return "pair set"
+    if (folder / "state.json").is_file() or (folder / "config.json").is_file():
+        return "training run"
+    raise Sc2DataError(f"{folder} holds no dataset.json, pairset.json or state.json: not a "
+                       f"dataset (sc2data rollout), pair set (sc2data pair) or training run "
+                       f"(sc2data train) folder")
+
+
+def verify_folder(folder: Path) -> tuple[str, list[str], list[str]]:
+    """(what the folder is, faults, notes)."""
+    what = kind(folder)
+    if what == "dataset":
+        return (what, *_dataset(folder))
+    if what == "pair set":
+        return what, _pairset(folder), []
+    return (what, *_run(folder))
+
+
+def info(folder: Path) -> list[str]:
+    """A plain-text description of the folder, whatever it is."""
+    what = kind(folder)
+    if what == "dataset":
+        return _dataset_info(folder)
+    if what == "pair set":
+        return _pairset_info(folder)
+    return _run_info(folder)
+
+
+def _dataset_info(folder: Path) -> list[str]:
+    from sc2data.data.audit import info as dataset_info
+    from sc2data.data.dataset import read_index
+    from sc2data.labels.store import LABELS_FILE, read_meta
+
+    lines = dataset_info(folder)
+    marines = read_index(folder).column("reward").to_numpy()
+    if len(marines):
+        lines += ["", f"marines per episode (the game's score, from the index): mean "
+                      f"{marines.mean():.1f}, min {marines.min():.0f}, max {marines.max():.0f} "
+                      f"over {len(marines)} episodes"]
+    if not (folder / LABELS_FILE).exists():
+        return lines + ["labels    none yet (sc2data label)"]
+    try:
+        meta = read_meta(folder)
+    except Sc2DataError as e:
+        return lines + [f"labels    not usable: {e}"]
+    stacks = max(int(meta["stacks"]), 1)
+    lines += ["", f"labels    {meta['stacks']:,} stacks, made {meta['created']}",
+              f"{'rule id':<22} {'version':>7} {'stacks':>10} {'rate':>8}  command"]
+    for r in meta["rules"]:
+        n = int(meta["counts"].get(r["id"], 0))
+        lines.append(f"{r['id']:<22} {r['version']:>7} {n:>10,} {100 * n / stacks:>7.3f}%  "
+                     f"{r['command']}")
+    lines.append(f"{'(null)':<22} {'':>7} {meta['null']:>10,} "
+                 f"{100 * meta['null'] / stacks:>7.3f}%")
+    return lines
+
+
+def _pairset_info(folder: Path) -> list[str]:
+    from sc2data.pairs.loader import PairSet
+    from sc2data.vocab import SPLITS
+
+    p = PairSet(folder)
+    meta = p.meta
+    lines = [f"pair set  {folder}", f"recipe    {meta.get('recipe_name')}   seed {meta.get('seed')}"
+             f"   split {meta.get('recipe', {}).get('split', {}).get('method', '?')}",
+             "", f"{'split':<6} {'matched':>9} {'mismatched':>11} {'null':>8} {'states':>8}"]
+    for s in SPLITS:
+        c = meta.get("counts", {}).get(s, {})
+        lines.append(f"{s:<6} {c.get('matched', 0):>9,} {c.get('mismatched', 0):>11,} "
+                     f"{c.get('null', 0):>8,} {meta['splits'][s]['states']:>8,}")
+    lines += ["", "commands"] + [f"  {c['id']:<20} {c['text']!r}" + (
+        f"  held-out paraphrases: {', '.join(map(repr, c['paraphrases']))}"
+        if c.get("paraphrases") else "") for c in p.commands]
+    return lines
+
+
+def _run_info(folder: Path) -> list[str]:
+    import json
+
+    from sc2data.model.train import read_state
+
+    config = json.loads((folder / "config.json").read_text()) if \
+        (folder / "config.json").is_file() else {}
+    state = read_state(folder)
+    done = "no state.json" if state is None else (
+        f"{state['epochs_done']} of {state['epochs']} epochs"
+        + ("" if state["finished"] else " (unfinished: rerun the train command to resume)"))
+    lines = [f"run       {folder}", f"data      {config.get('data')}", f"progress  {done}",
+             "settings  " + "  ".join(f"{k}={config.get(k)}" for k in
+                                      ("epochs", "batch_size", "lr", "l2", "seed",
+                                       "categorical", "pool", "device_used"))]
+    rows = [json.loads(line) for line in (folder / "metrics.jsonl").open()] if \
+        (folder / "metrics.jsonl").is_file() else []
+    if rows:
+        best = min(rows, key=lambda r: r["val_loss"])
+        lines += ["", f"{'epoch':>5} {'train loss':>10} {'train acc':>9} {'val loss':>9} "
+                      f"{'val acc':>8}"]
+        lines += [f"{r['epoch']:>5} {r['train_loss']:>10.4f} {r['train_acc']:>9.2%} "
+                  f"{r['val_loss']:>9.4f} {r['val_acc']:>8.2%}" + ("  *" if r is best else "")
+                  for r in rows]
+    if (folder / "eval.json").is_file():
+        ev = json.loads((folder / "eval.json").read_text())
+        acc = {s: v.get("accuracy") for s, v in ev.get("splits", {}).items()}
+        lines += ["", "eval      " + "  ".join(f"{s} {a:.2%}" for s, a in acc.items()
+                                               if isinstance(a, float))]
+    return lines
+
+
+def _faults_of(check: object) -> list[str]:
+    try:
+        check()  # type: ignore[operator]
+    except Sc2DataError as e:
+        return [str(e)]
+    return []
+
+
+def _dataset(folder: Path) -> tuple[list[str], list[str]]:
+    from sc2data.data.audit import verify
+    from sc2data.labels.store import LABELS_FILE, read_labels
+
+    faults = verify(folder)
+    if not (folder / LABELS_FILE).exists():
+        return faults, ["no labels yet (sc2data label)"]
+    return faults + _faults_of(lambda: read_labels(folder)), ["labels checked"]
+
+
+def _pairset(folder: Path) -> list[str]:
+    from sc2data.pairs.loader import PairSet
+    from sc2data.vocab import SPLITS
+
+    try:
+        pairs = PairSet(folder)
+    except Sc2DataError as e:
+        return [str(e)]
+    faults = []
+    for split in SPLITS:
+        try:
+            packed = pairs.packed(split)
+            packed.check_chunks()
+            packed.close()
+        except Sc2DataError as e:
+            faults.append(str(e))
+    return faults
+
+
+def _run(folder: Path) -> tuple[list[str], list[str]]:
+    from sc2data.model.train import check_run, read_state
+
+    try:
+        state = read_state(folder)
+        if state is None:
+            return [f"{folder} has no state.json (written by an older sc2data, or interrupted "
+                    f"before its first epoch)"], []
+        check_run(folder, allow_unfinished=True, files=tuple(state["sha256"]))
+        from sc2data.model.reward import load_model
+
+        load_model(folder, allow_unfinished=True)
+    except Sc2DataError as e:
+        return [str(e)], []
+    notes = [] if state["finished"] else [f"unfinished: {state.get('epochs_done')} of "
+                                          f"{state.get('epochs')} epochs"]
+    return [], notes

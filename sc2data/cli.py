@@ -137,6 +137,7 @@ def label(
                                           "leave out."),
     rules_dir: Optional[Path] = typer.Option(None, "--rules-dir", help=_RULES_DIR_HELP),
     batch_size: int = typer.Option(256, "--batch-size", help="Stacks per rule call."),
+    overwrite: bool = typer.Option(False, help="Replace labels made with another set of rules."),
     workers: int = typer.Option(1, "--workers", help="Processes labelling shards at once "
                                                      "(the labels do not depend on it)."),
     progress: Optional[bool] = None,
@@ -147,7 +148,8 @@ def label(
     from sc2data.labels.registry import parse_ids
 
     selection = {"include": parse_ids(rules), "exclude": parse_ids(exclude) or [],
-                 "rules_dir": rules_dir, "batch_size": batch_size, "progress": progress}
+                 "rules_dir": rules_dir, "batch_size": batch_size, "progress": progress,
+                 "overwrite": overwrite}
     lines: list[str] = []
     options = ray.options() if ray else None
     if options is not None:

@@ -94,8 +94,12 @@ def _part_name(key: str) -> str:
 
 def label(source: Source, rules: Sequence[Registered], out_dir: Path | str, *,
           batch_size: int = DEFAULT_BATCH, progress: bool | None = None,
-          run_units: UnitRunner | None = None) -> LabelSummary:
+          run_units: UnitRunner | None = None, overwrite: bool = False) -> LabelSummary:
     """Label every unit of ``source`` with ``rules`` into ``out_dir``; resumes finished units.
+
+    Labels of another set of rules are never replaced silently (a later ``pair`` would miss the
+    rules left out): that takes ``overwrite``. Labels of the same rules whose code or data
+    changed are stale, and are relabelled.
 
     One run at a time per folder (a lock file); an unwritable folder is a one-line error.
     ``run_units`` labels the units instead of this process (``sc2data.scaleout.driver``).
@@ -110,6 +114,7 @@ def label(source: Source, rules: Sequence[Registered], out_dir: Path | str, *,
     done = _existing(out, fp)
     if done is not None:
         return done
+    _check_replacing(out, rules, overwrite)
     try:
         out.mkdir(parents=True, exist_ok=True)
         with FolderLock(out, "label"):
@@ -183,6 +188,21 @@ def _intact(part: Path) -> bool:
         return False
 
 
+def _check_replacing(out: Path, rules: Sequence[Registered], overwrite: bool) -> None:
+    """Refuse to replace intact labels of other rules unless asked."""
+    if overwrite or not (out / LABELS_FILE).exists():
+        return
+    try:
+        old = [r["id"] for r in read_meta(out)["rules"]]
+    except Sc2DataError:
+        return  # damaged labels: relabelling them is the remedy
+    new = [e.id for e in rules]
+    if sorted(old) != sorted(new):
+        raise Sc2DataError(f"{out} already has labels of the rules {', '.join(old)}; this run "
+                           f"labels with {', '.join(new)}. Pass --overwrite to replace them (a "
+                           f"recipe naming a rule left out then cannot be paired)")
+
+
 def _summary(out: Path, meta: dict[str, Any], resumed: int = 0,
              up_to_date: bool = False) -> LabelSummary:
     return LabelSummary(path=out / LABELS_FILE, stacks=meta["stacks"], counts=meta["counts"],
@@ -207,7 +227,8 @@ def _existing(out: Path, fp: str) -> LabelSummary | None:
 def label_dataset(data: Path | str, *, include: Sequence[str] | None = None,
                   exclude: Sequence[str] = (), rules_dir: Path | str | None = None,
                   batch_size: int = DEFAULT_BATCH, progress: bool | None = None,
-                  workers: int = 1, run_units: UnitRunner | None = None) -> LabelSummary:
+                  workers: int = 1, run_units: UnitRunner | None = None,
+                  overwrite: bool = False) -> LabelSummary:
     """``sc2data label``: load and select rules, open the dataset, label it into its folder,
     in ``workers`` processes (one shard at a time each) or through ``run_units``."""
     from sc2data.labels.registry import load_registry
@@ -222,4 +243,4 @@ def label_dataset(data: Path | str, *, include: Sequence[str] | None = None,
 
         run_units = LocalUnits(workers, Path(data), selection)
     return label(dataset_source(data), rules, data, batch_size=batch_size, progress=progress,
-                 run_units=run_units)
+                 run_units=run_units, overwrite=overwrite)

@@ -429,7 +429,8 @@ class RayUnits:
 def label_on_ray(data: str | os.PathLike[str], options: RayOptions, *,
                  include: Sequence[str] | None = None, exclude: Sequence[str] = (),
                  rules_dir: Path | str | None = None, batch_size: int = 256,
-                 progress: bool | None = None) -> tuple[LabelSummary, ScaleoutReport]:
+                 progress: bool | None = None, overwrite: bool = False
+                 ) -> tuple[LabelSummary, ScaleoutReport]:
     """``sc2data label --ray``: :func:`sc2data.labels.label.label_dataset` with units as Ray tasks."""
     from sc2data.labels.label import label_dataset
 
@@ -439,5 +440,6 @@ def label_on_ray(data: str | os.PathLike[str], options: RayOptions, *,
     runner = RayUnits(options, data, (include, tuple(exclude), rules))
     with connect(options):
         summary = label_dataset(data, include=include, exclude=exclude, rules_dir=rules_dir,
-                                batch_size=batch_size, progress=progress, run_units=runner)
+                                batch_size=batch_size, progress=progress, run_units=runner,
+                                overwrite=overwrite)
     return summary, runner.report

@@ -130,7 +130,11 @@ def test_rerun_is_up_to_date_and_new_rules_relabel(tmp_path: Path) -> None:
     calls: list = []
     again = label(source(calls=calls), RULES, tmp_path, progress=False)
     assert again.up_to_date and calls == []
-    fewer = label(source(calls=calls), RULES[:2], tmp_path, progress=False)
+    with pytest.raises(Sc2DataError, match="already has labels of the rules build_scv, "
+                                           ".*Pass --overwrite to replace them"):
+        label(source(calls=calls), RULES[:2], tmp_path, progress=False)
+    assert calls == [] and read_meta(tmp_path)["counts"].keys() == {r.id for r in RULES}
+    fewer = label(source(calls=calls), RULES[:2], tmp_path, progress=False, overwrite=True)
     assert not fewer.up_to_date and len(calls) == 3
     assert read_meta(tmp_path)["counts"].keys() == {"build_scv", "collect_minerals"}
 
@@ -217,7 +221,7 @@ def test_failure_keeps_an_older_complete_labels_file(tmp_path: Path) -> None:
     before = (tmp_path / LABELS_FILE).read_bytes()
     with pytest.raises(RuleError):
         label(source(), RULES + misbehaving(tmp_path, "raise ValueError('boom')"), tmp_path,
-              batch_size=7, progress=False)
+              batch_size=7, progress=False, overwrite=True)
     assert (tmp_path / LABELS_FILE).read_bytes() == before
     assert read_labels(tmp_path).meta["counts"]["build_scv"] == 6
 

@@ -48,7 +48,8 @@ class BuildReport:
 
 
 def build(recipe: Recipe, out: str | os.PathLike[str], *, workers: int = 1,
-          progress: bool | None = None, ray: RayOptions | None = None) -> BuildReport:
+          progress: bool | None = None, ray: RayOptions | None = None,
+          rules_dir: Path | str | None = None) -> BuildReport:
     """Run every stage of ``recipe`` into ``out``; stages already complete are kept.
 
     ``ray`` (:class:`sc2data.scaleout.driver.RayOptions`): roll out and label as Ray tasks, on one Ray
@@ -61,6 +62,12 @@ def build(recipe: Recipe, out: str | os.PathLike[str], *, workers: int = 1,
     data = out / ROLLOUT_DIR
     config = RolloutConfig.from_recipe(recipe)
     config.validate()
+    # Every rule the recipe names exists and can read the layers it rolls out, before any work.
+    from sc2data.labels.apply import check_requirements
+    from sc2data.labels.registry import load_registry
+
+    rules = load_registry(rules_dir).select(list(recipe.rule_ids))
+    check_requirements(rules, config.schema, f"recipe {recipe.name!r} ({config.layers} layers)")
     if out.exists() and not out.is_dir():
         raise Sc2DataError(f"output {out} exists and is not a folder; choose another --out")
     made = not out.exists()
@@ -71,14 +78,15 @@ def build(recipe: Recipe, out: str | os.PathLike[str], *, workers: int = 1,
             from None
     try:
         with FolderLock(out, "build"):
-            return _stages(recipe, config, out, data, report, workers, progress, ray)
+            return _stages(recipe, config, out, data, report, workers, progress, ray, rules_dir)
     finally:
         if made and [p.name for p in out.iterdir()] == [LOCK]:  # failed before writing anything
             shutil.rmtree(out, ignore_errors=True)
 
 
 def _stages(recipe: Recipe, config: RolloutConfig, out: Path, data: Path, report: BuildReport,
-            workers: int, progress: bool | None, ray: RayOptions | None) -> BuildReport:
+            workers: int, progress: bool | None, ray: RayOptions | None,
+            rules_dir: Path | str | None) -> BuildReport:
     """The three stages, under the build folder's lock."""
     from sc2data.data.rollout import check_folder, rollout
     from sc2data.labels.label import label_dataset
@@ -105,10 +113,10 @@ def _stages(recipe: Recipe, config: RolloutConfig, out: Path, data: Path, report
         t = time.perf_counter()
         if ray is None:
             labels = label_dataset(data, include=list(recipe.rule_ids), progress=progress,
-                                   workers=workers)
+                                   workers=workers, rules_dir=rules_dir)
         else:
             labels, retries = label_on_ray(data, ray, include=list(recipe.rule_ids),
-                                           progress=progress)
+                                           progress=progress, rules_dir=rules_dir)
             report.lines += retries.lines() if retries.tasks else []
         report.seconds["label"] = time.perf_counter() - t
         report.lines.append(labels.table())

@@ -265,6 +265,7 @@ def build(
     workers: Optional[int] = typer.Option(None, help="Rollout and label processes [default: 2]; "
                                                      "with --ray, tasks at once [default: all "
                                                      "CPUs]. The data does not depend on it."),
+    rules_dir: Optional[Path] = typer.Option(None, "--rules-dir", help=_RULES_DIR_HELP),
     progress: Optional[bool] = None,
     ray: Optional[RayArgs] = None,
 ) -> None:
@@ -276,7 +277,7 @@ def build(
     r = load(recipe)
     options = ray.options(workers) if ray else None
     report = run(r, out, workers=2 if workers is None else workers, progress=progress,
-                 ray=options)
+                 ray=options, rules_dir=rules_dir)
     for line in report.lines:
         typer.echo(line)
     typer.echo(report.table())

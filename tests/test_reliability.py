@@ -71,3 +71,28 @@ def test_rollout_refuses_absurd_episode_counts(tmp_path: Path,
                             str(tmp_path / "d")], capsys)
     assert_one_line_error(code, err, "episodes must be at most 1,000,000")
     assert not (tmp_path / "d").exists()
+
+
+def test_build_names_an_unknown_rule_before_any_rollout(tmp_path: Path,
+                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    recipe = _recipe(tmp_path, "[commands.train_marine]", "[commands.train_marauder]")
+    code, _, err = run_cli(["build", str(recipe), "--out", str(tmp_path / "out")], capsys)
+    assert_one_line_error(code, err, "unknown rule id 'train_marauder'")
+    assert not (tmp_path / "out").exists()  # nothing rolled out
+
+
+def test_build_finds_rules_in_rules_dir(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    rules = tmp_path / "my_rules"
+    rules.mkdir()
+    (rules / "late.py").write_text(
+        "import numpy as np\nfrom sc2data.rulebase import rule\n"
+        "@rule(id='train_marauder', command='train a marine', requires=['screen/unit_type'])\n"
+        "def f(batch):\n    return np.zeros(len(batch), bool)\n")
+    recipe = _recipe(tmp_path, "[commands.train_marine]", "[commands.train_marauder]")
+    text = recipe.read_text().replace("layers = \"paper\"", "layers = \"paper\"\nepisodes = 1",
+                                      ).replace("episodes = 20\n", "")
+    recipe.write_text(text)
+    code, _, err = run_cli(["build", str(recipe), "--out", str(tmp_path / "out"), "--rules-dir",
+                            str(rules), "--no-progress"], capsys)
+    # the rule is found, the data is rolled out and labelled; one episode has too few states
+    assert "unknown rule" not in err and (tmp_path / "out" / "rollout" / "labels.parquet").exists()

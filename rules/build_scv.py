@@ -1,13 +1,16 @@
 """``build_scv`` — "build an SCV".
 
-Meaning: an SCV finished training between the two frames. ``player.food_workers`` cannot say so:
-supply is taken when an SCV is *queued*, so it rises 272 game loops before the SCV exists. The
-value of units does: ``score_cumulative.total_value_units`` grows by an SCV's or a marine's cost
-(50 minerals each) when one is created, and ``score_cumulative.score`` — BuildMarines' curriculum
-score — counts marines created. So an SCV appeared when the units' value rose by more than the
-marines made explain::
+Meaning: an SCV finished training between the two frames. The value of units says so:
+``score_cumulative.total_value_units`` grows by an SCV's or a marine's cost (50 minerals each)
+when one is created, and ``score_cumulative.score`` — BuildMarines' curriculum score — counts
+marines created. So an SCV appeared when the units' value rose by more than the marines made
+explain::
 
     Δ total_value_units > MARINE_MINERALS × Δ score
+
+(``player.food_used`` will not do: supply is taken when an SCV is *queued*, 272 game loops before
+it exists. ``player.food_workers`` counts only workers that exist, as the game's does, but an SCV
+dying in the same step cancels a completion there.)
 
 This holds whether the game counts ``total_value_units`` over living units (the simulator; a unit
 dying lowers it, which can only hide an event, never fake one) or over all units ever made. It

@@ -1,8 +1,8 @@
 """``collect_minerals`` — "collect minerals".
 
 Meaning: an idle SCV was put back to work. ``player.idle_worker_count`` fell while
-``player.food_workers`` did not, so an idle SCV that simply died does not count (an SCV queued in
-that same step would hide the death, since supply is taken at queue time — rare).
+``player.food_workers`` (workers that exist) did not, so an idle SCV that simply died does not
+count (an SCV completed in that same step would hide the death — rare).
 
 Why not "collected minerals rose": twelve or more SCVs deliver all the time on BuildMarines, so
 that fires on about half of all stacks and would leave no null states. Sending idle workers back to

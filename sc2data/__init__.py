@@ -1,23 +1,53 @@
-"""sc2data: natural-language commands grounded in StarCraft II BuildMarines game states."""
+"""sc2data: natural-language commands grounded in StarCraft II BuildMarines game states.
+
+The public API, all loaded on first use so that ``import sc2data`` itself imports nothing heavy
+(pysc2, h5py, pyarrow and torch come with the names that need them):
+
+* ``make_env("sim" | "sc2", seed=…)`` — a BuildMarines pysc2 ``environment.Base``;
+* ``make_agent(name, seed=…)`` — a pysc2 ``BaseAgent`` (``random``, ``reduced-random``, ``scripted``);
+* ``Stacker(schema)`` — live observations into two-frame stacks;
+* ``open_dataset(DIR)`` / ``Dataset`` — the stacks of a rollout folder;
+* ``load_model(RUN)`` — a trained MEM as a batched reward signal;
+* ``Schema``, ``StackBatch`` — the state schema and a batch of stacks.
+"""
 
 from __future__ import annotations
 
-from typing import Any
+import importlib
+from typing import TYPE_CHECKING, Any
 
-from sc2data.schema import Schema, StackBatch
+if TYPE_CHECKING:
+    from sc2data.data.dataset import Dataset, open_dataset
+    from sc2data.game.agents import make_agent
+    from sc2data.game.env import make_env
+    from sc2data.model.reward import load_model
+    from sc2data.schema import Schema, StackBatch
+    from sc2data.stacker import Stacker
 
-__all__ = ["Dataset", "Schema", "StackBatch", "load_model", "open_dataset"]
+_WHERE = {
+    "Dataset": "sc2data.data.dataset",
+    "open_dataset": "sc2data.data.dataset",
+    "make_agent": "sc2data.game.agents",
+    "make_env": "sc2data.game.env",
+    "load_model": "sc2data.model.reward",
+    "Schema": "sc2data.schema",
+    "StackBatch": "sc2data.schema",
+    "Stacker": "sc2data.stacker",
+}
+"""Each public name and the module it lives in."""
+
+__all__ = sorted(_WHERE)
 
 
 def __getattr__(name: str) -> Any:
-    """``open_dataset``, ``Dataset`` and ``load_model`` load their dependencies (h5py, pyarrow,
-    torch) only when first used."""
-    if name in ("Dataset", "open_dataset"):
-        from sc2data.data import dataset
+    """Import a public name's module the first time the name is used."""
+    module = _WHERE.get(name)
+    if module is None:
+        raise AttributeError(f"module 'sc2data' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
 
-        return getattr(dataset, name)
-    if name == "load_model":
-        from sc2data.model.reward import load_model
 
-        return load_model
-    raise AttributeError(f"module 'sc2data' has no attribute {name!r}")
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})

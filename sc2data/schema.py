@@ -13,7 +13,7 @@ dtype its scale allows, losslessly.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -245,6 +245,39 @@ class Schema:
         return schema
 
 
+Index = int | np.integer | slice | Sequence[int] | np.ndarray
+"""What selects stacks of a :class:`StackBatch` or a dataset: a position, a slice, positions or a
+boolean mask."""
+
+
+def positions(index: Index, n: int) -> np.ndarray | slice:
+    """``index`` into ``n`` items as non-negative int64 positions (a slice stays a slice of
+    ``range(n)``, normalised); negative positions count from the end, as in numpy."""
+    if isinstance(index, slice):
+        return slice(*index.indices(n))
+    if isinstance(index, (bool, np.bool_)):
+        raise TypeError("a stack index must be an int, a slice, positions or a boolean mask")
+    if isinstance(index, (int, np.integer)):
+        i = int(index)
+        if not -n <= i < n:
+            raise IndexError(f"stack {i} is out of range for {n} stacks")
+        i %= n
+        return slice(i, i + 1)
+    arr = np.asarray(index)
+    if arr.dtype == bool:
+        if arr.shape != (n,):
+            raise IndexError(f"a boolean mask must have shape ({n},), not {arr.shape}")
+        return np.flatnonzero(arr)
+    if arr.size == 0:
+        return np.zeros(0, np.int64)
+    if arr.ndim != 1 or not np.issubdtype(arr.dtype, np.integer):
+        raise TypeError(f"stack positions must be a 1-d array of ints, not {arr.dtype} "
+                        f"{arr.shape}")
+    if arr.min() < -n or arr.max() >= n:
+        raise IndexError(f"stack positions must lie in [{-n}, {n})")
+    return arr.astype(np.int64) % n if n else arr.astype(np.int64)
+
+
 class SchemaError(ValueError):
     """Data whose schema this version of sc2data cannot read."""
 
@@ -275,7 +308,20 @@ class StackBatch:
         return self.size
 
     def __repr__(self) -> str:
-        return f"StackBatch(size={self.size}, keys={len(self.arrays)})"
+        """Shapes and dtypes per key, never the arrays themselves."""
+        lines = "".join(f"\n  {k}: {tuple(a.shape)} {a.dtype}" for k, a in self.arrays.items())
+        return f"StackBatch(size={self.size}, keys={len(self.arrays)}{lines})"
+
+    def __getitem__(self, index: Index) -> StackBatch:
+        """Stacks by position: an int gives a batch of one (so any result feeds a rule or the
+        model as it is); a slice, an array of positions or a boolean mask, a batch of those."""
+        rows = positions(index, self.size)
+        return StackBatch({k: a[rows] for k, a in self.arrays.items()}, self.schema)
+
+    def __iter__(self) -> Iterator[StackBatch]:
+        """Each stack in turn, as a batch of one."""
+        for i in range(self.size):
+            yield self[i]
 
     def layer(self, key: str) -> np.ndarray:
         """``(B, 2, H, W)`` array of ``screen/<name>`` or ``minimap/<name>``."""

@@ -29,7 +29,7 @@ from sc2data.data.shards import Shard
 from sc2data.errors import Sc2DataError
 from sc2data.files import write_atomic
 from sc2data.formats import DATASET
-from sc2data.schema import Block, Schema, SchemaError, StackBatch
+from sc2data.schema import Block, Index, Schema, SchemaError, StackBatch, positions
 
 MANIFEST = "dataset.json"
 INDEX = "index.parquet"
@@ -211,8 +211,37 @@ class Dataset:
         return int(self._stack_offsets[-1])
 
     def __repr__(self) -> str:
+        """Counts and the shape of one stack, never arrays."""
+        per_stack = []
+        for group in ("screen", "minimap"):
+            ls = self.schema.group(group)
+            if ls:
+                side = self.schema.size(group)
+                dtypes = "/".join(sorted({l.dtype.name for l in ls}))
+                per_stack.append(f"{group} {len(ls)} x (2, {side}, {side}) {dtypes}")
+        per_stack += [f"{v.name} (2, {v.size}) {v.dtype.name}" for v in self.schema.vectors]
         return (f"Dataset({str(self.folder)!r}, episodes={len(self.episode_ids)}, "
-                f"stacks={len(self)}, layers={len(self.schema.layers)})")
+                f"stacks={len(self)}; per stack: {', '.join(per_stack)})")
+
+    def __getitem__(self, index: Index | tuple[int, Index]) -> StackBatch:
+        """Stacks as a :class:`StackBatch`: ``ds[i]`` by global position (the order of
+        :meth:`iter_batches`; an int gives a batch of one), ``ds[i:j]``, ``ds[positions]`` or a
+        boolean mask, and ``ds[episode, step]`` (``step`` also a slice or positions within that
+        episode)."""
+        if isinstance(index, tuple):
+            if len(index) != 2 or not isinstance(index[0], (int, np.integer)):
+                raise IndexError("index a dataset as ds[position] or ds[episode, step]")
+            episode = int(index[0])
+            row = int(self._rows(np.array([episode]), np.array([0]))[0])
+            steps = _as_array(positions(index[1], int(self.n_steps[row])))
+            return self.read(np.full(len(steps), episode), steps)
+        return self.read(*self.locate_positions(_as_array(positions(index, len(self)))))
+
+    def __iter__(self) -> Iterator[StackBatch]:
+        """Every stack in global order, each a batch of one (read 1,024 at a time; for speed
+        iterate :meth:`iter_batches` instead)."""
+        for _, _, batch in self.iter_batches():
+            yield from batch
 
     def __enter__(self) -> Dataset:
         return self
@@ -389,6 +418,11 @@ class Dataset:
                     out[k] = np.empty((len(rows), *v.shape[1:]), v.dtype)
                 out[k][sel] = v[at[sel]]
         return out
+
+
+def _as_array(rows: np.ndarray | slice) -> np.ndarray:
+    return np.arange(rows.start, rows.stop, rows.step, dtype=np.int64) \
+        if isinstance(rows, slice) else rows
 
 
 def open_dataset(folder: str | os.PathLike[str], cache_bytes: int = 128 << 20) -> Dataset:

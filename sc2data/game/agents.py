@@ -285,7 +285,7 @@ class ScriptedAgent(MacroAgent):
             self._hold("scv", 8)
             return self._queue(units.Terran.CommandCenter,
                                v.centre_pixel(v.own(units.Terran.CommandCenter)),
-                               _F.Train_SCV_quick)
+                               _F.Train_SCV_quick, upto=self.scvs)
         if (len(rax) < self.barracks and cap > 15 * n_cc and minerals >= 150 + reserve
                 and self._ready("barracks") and v.placements(3).any()):
             self._hold("barracks", 25)
@@ -302,13 +302,18 @@ class ScriptedAgent(MacroAgent):
             return self.kill_marine()
         return self.no_op()
 
-    def _queue(self, unit_type: int, xy: tuple[int, int] | None, train: Any) -> Macro:
-        """Select a production building and top its queue up to ``self.queue``."""
+    def _queue(self, unit_type: int, xy: tuple[int, int] | None, train: Any,
+               upto: int | None = None) -> Macro:
+        """Select a production building and top its queue up to ``self.queue``; with ``upto``,
+        never past ``upto`` workers counting those in its queue (the game's ``food_workers``
+        counts only workers that exist, as python-sc2 bots add their pending ones to it)."""
         ok = yield from self.select_unit(unit_type, xy)
         while ok:
             v = self._v()
             if (len(v.build_queue) >= self.queue or v.player[_P.minerals] < 50
-                    or v.player[_P.food_used] >= v.player[_P.food_cap]):
+                    or v.player[_P.food_used] >= v.player[_P.food_cap]
+                    or (upto is not None
+                        and v.player[_P.food_workers] + len(v.build_queue) >= upto)):
                 return
             yield train("now")
             ok = self._v().selected_type() == unit_type

@@ -8,11 +8,12 @@ from sc2data.rules.build_scv import BuildScv
 rule = BuildScv()
 
 
-def frame(value: int, marines_made: int = 0, workers: int = 12) -> dict:
+def frame(value: int, marines_made: int = 0, workers: int = 12, used: int = 12) -> dict:
     f = blank_frame()
     set_field(f, "score_cumulative", "total_value_units", value)
     set_field(f, "score_cumulative", "score", marines_made)
     set_field(f, "player", "food_workers", workers)
+    set_field(f, "player", "food_used", used)
     return f
 
 
@@ -33,8 +34,9 @@ def test_marine_completed_is_not_an_scv() -> None:
 
 
 def test_queued_scv_does_not_fire_until_it_exists() -> None:
-    # Supply (food_workers) is taken at queue time; the unit's value appears at completion.
-    assert answers((frame(600, workers=12), frame(600, workers=13))) == [False]
+    # Queueing takes supply (food_used); food_workers and the units' value rise at completion.
+    assert answers((frame(600, used=12), frame(600, used=13))) == [False]
+    assert answers((frame(600, used=13), frame(650, workers=13, used=13))) == [True]
 
 
 def test_deaths_do_not_fire() -> None:

@@ -1,11 +1,12 @@
 """Construction and production: SCVs place and build structures; the CC and Barracks train.
 
 Costs follow the game: a unit's minerals and supply are taken when it is queued (queues of 5,
-refused without the minerals or free supply); a structure's minerals when its SCV reaches the
-site and places it (the order itself is refused when the site is invalid or the minerals are
-short). A structure under construction rises from 10% hit points; it pauses if its SCV is
-ordered away or dies (another SCV resumes it with a right-click) and the SCV goes idle when it
-completes. Supply from a depot or CC counts only once it is complete.
+refused without the minerals or free supply) — ``food_used`` counts it from then on, while
+``food_workers`` and ``food_army`` count only units that exist, as the game's do; a structure's
+minerals when its SCV reaches the site and places it (the order itself is refused when the site
+is invalid or the minerals are short). A structure under construction rises from 10% hit
+points; it pauses if its SCV is ordered away or dies (another SCV resumes it with a right-click)
+and the SCV goes idle when it completes. Supply from a depot or CC counts only once it is complete.
 """
 
 from __future__ import annotations
@@ -134,7 +135,7 @@ class Building(GameCore):
             return NOT_ENOUGH_FOOD
         self.minerals -= data.minerals
         self.spent += data.minerals
-        self._add_food(utype, data.supply_cost)
+        self.food_queued += data.supply_cost
         b.queue.append(utype)
         self._emit(t, "queued", utype, b.tag)
         if len(b.queue) == 1:
@@ -161,7 +162,7 @@ class Building(GameCore):
         data = md.UNIT_DATA[utype]
         self.minerals += data.minerals
         self.spent -= data.minerals
-        self._add_food(utype, -data.supply_cost)
+        self.food_queued -= data.supply_cost
         self._emit(t, "cancelled", utype, b.tag)
         if index == 0:
             b.qtoken += 1
@@ -173,6 +174,9 @@ class Building(GameCore):
 
     def _produce_done(self, b: Unit, t: float) -> None:
         utype = b.queue.pop(0)
+        cost = md.UNIT_DATA[utype].supply_cost
+        self.food_queued -= cost  # the supply stays taken: it moves to the unit that now exists
+        self._add_food(utype, cost)
         if utype == md.SCV:
             self._spawn_scv(b, t)
         else:

@@ -82,7 +82,12 @@ class GameCore(abc.ABC):
         """Bumped whenever a footprint is added or removed (static layers are redrawn then)."""
         self.minerals = md.START_MINERALS
         self.food_workers = 0
+        """Supply of the workers that exist (the game's ``food_workers``: not those in training)."""
         self.food_army = 0
+        """Supply of the army units that exist (the game's ``food_army``)."""
+        self.food_queued = 0
+        """Supply of the units in production queues: taken when a unit is queued, so it counts in
+        ``food_used`` but in neither of the two above until the unit exists."""
         self.food_cap = 0
         self.score = 0
         self.army_count = 0
@@ -206,7 +211,7 @@ class GameCore(abc.ABC):
     # ------------------------------------------------------------------ derived state
 
     def _add_food(self, utype: int, n: int) -> None:
-        """Supply taken (n > 0) or freed (n < 0) by a unit of ``utype``."""
+        """Supply taken (n > 0) or freed (n < 0) by an existing unit of ``utype``."""
         if utype == md.SCV:
             self.food_workers += n
         else:
@@ -214,7 +219,8 @@ class GameCore(abc.ABC):
 
     @property
     def food_used(self) -> int:
-        return self.food_workers + self.food_army
+        """All supply taken: existing units and those queued (the game's ``food_used``)."""
+        return self.food_workers + self.food_army + self.food_queued
 
     def _recount_supply(self) -> None:
         cap = sum(u.data.supply_provided for u in self.units.values()
@@ -388,7 +394,7 @@ class GameCore(abc.ABC):
             self.occupied[rows, cols] = False
             self.grid_version += 1
             for q in u.queue:
-                self._add_food(q, -md.UNIT_DATA[q].supply_cost)
+                self.food_queued -= md.UNIT_DATA[q].supply_cost
             u.queue.clear()
             if d.supply_provided:
                 self._recount_supply()

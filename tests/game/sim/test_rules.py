@@ -28,7 +28,8 @@ def test_train_scv_costs_50_and_takes_272_loops() -> None:
     queued_at = env.game.loop - 8
     assert obs["player"].minerals < 50 + 8  # 50 spent (a little mined meanwhile at most)
     assert env.game.spent == 50
-    assert obs["player"].food_used == 13
+    assert obs["player"].food_used == 13  # supply is taken when the SCV is queued …
+    assert obs["player"].food_workers == 12  # … but the game counts only workers that exist
     assert obs["build_queue"].shape == (1, 7)
     n = len(scvs(env))
     ts = wait_until(env, lambda: len(scvs(env)) > n)
@@ -91,7 +92,7 @@ def test_marine_takes_400_loops_and_scores() -> None:
     select(env, rax)
     ts = step(env, F.Train_Marine_quick("now"))
     queued_at = env.game.loop - 8
-    assert ts.observation["player"].food_army == 1
+    assert (ts.observation["player"].food_used, ts.observation["player"].food_army) == (13, 0)
     total = 0.0
     while not of_type(env, md.MARINE):
         ts = step(env)
@@ -100,6 +101,7 @@ def test_marine_takes_400_loops_and_scores() -> None:
     assert [e.loop for e in env.events if e.kind == "completed"] == [queued_at + 400]
     assert ts.observation["score_cumulative"].score == 1
     assert ts.observation["player"].army_count == 1
+    assert (ts.observation["player"].food_used, ts.observation["player"].food_army) == (13, 1)
 
 
 def test_queue_holds_five() -> None:
@@ -240,3 +242,37 @@ def test_several_actions_in_one_step() -> None:
     env.game.minerals = 100
     (ts,) = env.step([[F.select_point("select", pixel(*md.CC_POS)), F.no_op()]])
     assert ts.observation["single_select"][0].unit_type == md.CC
+
+
+def test_player_counts_units_in_production_only_in_food_used() -> None:
+    """The game's meaning: ``food_used`` includes units in production; ``food_workers``,
+    ``food_army``, ``army_count`` and ``idle_worker_count`` count only units that exist."""
+    env, _ = new_env()
+    g = env.game
+    rax = g._create(md.BARRACKS, 1, *BARRACKS_SITE)
+    g.minerals = 1000
+    step(env)
+    select(env, g.cc)
+    step(env, F.Train_SCV_quick("now"))
+    select(env, rax)
+    p = step(env, F.Train_Marine_quick("now")).observation["player"]
+    assert (p.food_used, p.food_workers, p.food_army, p.army_count) == (14, 12, 0, 0)
+    p = wait_until(env, lambda: len(scvs(env)) == 13).observation["player"]
+    assert (p.food_used, p.food_workers, p.food_army) == (14, 13, 0)
+    p = wait_until(env, lambda: bool(of_type(env, md.MARINE))).observation["player"]
+    assert (p.food_used, p.food_workers, p.food_army, p.army_count) == (14, 13, 1, 1)
+
+
+def test_losing_a_producer_frees_the_supply_of_its_queue() -> None:
+    env, _ = new_env()
+    g = env.game
+    rax = g._create(md.BARRACKS, 1, *BARRACKS_SITE)
+    g.minerals = 1000
+    step(env)
+    select(env, rax)
+    step(env, F.Train_Marine_quick("now"))
+    p = step(env, F.Train_Marine_quick("now")).observation["player"]
+    assert (p.food_used, p.food_army) == (14, 0)
+    g._kill(rax, float(g.loop))
+    p = step(env).observation["player"]
+    assert (p.food_used, p.food_workers, p.food_army) == (12, 12, 0)

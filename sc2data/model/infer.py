@@ -106,7 +106,7 @@ class _Group:
         if hh % p or ww % p:
             raise Sc2DataError(f"a layer is {hh}×{ww}, not divisible by the pool size {p}")
         h, w, n = hh // p, ww // p, max(len(jobs), 1)
-        image = np.zeros((b, 2, n, h, w), np.float32)  # channel t·n + i
+        image = (np.empty if jobs else np.zeros)((b, 2, n, h, w), np.float32)  # channel t·n + i
         for i, (src, c, *_) in enumerate(jobs):
             if c is None:
                 _cell_sums(src, p, np.float32, image[:, :, i])
@@ -156,13 +156,15 @@ def _present(u: np.ndarray, n: int) -> np.ndarray:
 def _cell_sums(x: np.ndarray, p: int, dtype: type, out: np.ndarray) -> None:
     """``(B, 2, H, W)`` → ``out`` ``(B, 2, H/p, W/p)``: the sum over each p×p cell (rows, then
     columns, in ``dtype``)."""
-    rows = x[:, :, 0::p].astype(dtype)
-    for d in range(1, p):
+    if p == 1:
+        np.copyto(out, x)
+        return
+    rows = np.add(x[:, :, 0::p], x[:, :, 1::p], dtype=dtype)
+    for d in range(2, p):
         rows += x[:, :, d::p]
-    cells = rows[..., 0::p].copy()
-    for d in range(1, p):
-        cells += rows[..., d::p]
-    np.copyto(out, cells)
+    np.add(rows[..., 0::p], rows[..., 1::p], out=out)
+    for d in range(2, p):
+        out += rows[..., d::p]
 
 
 class FastStateEncoder:

@@ -146,6 +146,9 @@ _BITS = ((8, np.uint8), (16, np.uint16), (32, np.uint32), (64, np.uint64))
 
 def _present(u: np.ndarray, n: int) -> np.ndarray:
     """The sorted compact ids that occur in ``u``."""
+    lo, hi = int(u.min()), int(u.max())
+    if hi - lo <= 1:  # min and max are all there is (most layers of a BuildMarines batch)
+        return np.arange(lo, hi + 1, dtype=np.int64)
     for width, dtype in _BITS:  # one bit per id, OR-reduced, in the narrowest integer
         if n <= width:
             bits = int(np.bitwise_or.reduce(np.left_shift(dtype(1), u, dtype=dtype), axis=None))

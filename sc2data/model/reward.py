@@ -1,8 +1,11 @@
 """A trained MEM as a scorer: ``sc2data.load_model(RUN).distance(stacks, texts)``.
 
-The object a reinforcement-learning loop calls every step (the paper's purpose: narration as a dense shaping
-reward): batched, on CPU or GPU, with command embeddings cached (a narration repeats the same few
-commands), and the same input packing as training. Evaluation and t-SNE use it too.
+The object a reinforcement-learning loop calls every step (narration as a dense shaping reward):
+batched, on CPU or GPU, with command embeddings cached (a narration repeats the same few
+commands). On a GPU states go through the training path's input packing; on a CPU through
+``sc2data.model.infer.FastStateEncoder``, the same function on the channels each batch uses
+(distances equal to float rounding, several times faster: BENCHMARKS.md). Evaluation and t-SNE
+use it too.
 """
 
 from __future__ import annotations
@@ -22,7 +25,9 @@ from sc2data.schema import Schema, StackBatch
 class MEMScorer:
     """A trained MEM: state and command embeddings, distances, matches."""
 
-    def __init__(self, model: Any, meta: Mapping[str, Any], device: Any) -> None:
+    def __init__(self, model: Any, meta: Mapping[str, Any], device: Any, fast: bool = True
+                 ) -> None:
+        from sc2data.model.infer import FastStateEncoder
         from sc2data.model.words import WordVectors
 
         self.model, self.meta, self.device = model, dict(meta), device
@@ -33,6 +38,9 @@ class MEMScorer:
         self.commands: list[dict[str, Any]] = list(meta.get("commands", []))
         self._keys = model.state.keys()
         self._text_cache: dict[str, np.ndarray] = {}
+        self.fast = FastStateEncoder(model.state) if fast and device.type == "cpu" and \
+            FastStateEncoder.supports(model.state) else None
+        """The CPU fast path, or None: the training path's packing (the reference)."""
 
     def __repr__(self) -> str:
         return (f"MEMScorer(layers={len(self.schema.layers)}, vocab={len(self.words.words)}, "
@@ -58,11 +66,14 @@ class MEMScorer:
                                    f"(2, {size}, {size})")
         n = len(arrays[self._keys[0]])
         out = []
-        with torch.no_grad():
+        with torch.inference_mode():
             for s in range(0, n, batch_size):
                 part = {k: np.asarray(arrays[k][s:s + batch_size]) for k in self._keys}
-                x = model_inputs(self.model, part, self.device)
-                out.append(self.model.state(x).float().cpu().numpy())
+                if self.fast is not None:
+                    e = self.fast(part)
+                else:
+                    e = self.model.state(model_inputs(self.model, part, self.device))
+                out.append(e.float().cpu().numpy())
         return np.concatenate(out) if out else np.zeros((0, self.model.cfg.dim), np.float32)
 
     def embed_texts(self, texts: Sequence[str]) -> np.ndarray:
@@ -72,7 +83,7 @@ class MEMScorer:
         new = sorted({t for t in texts if t not in self._text_cache})
         if new:
             ids, lengths = self.words.encode(new)
-            with torch.no_grad():
+            with torch.inference_mode():
                 e = self.model.command(torch.from_numpy(ids).to(self.device),
                                        torch.from_numpy(lengths)).float().cpu().numpy()
             self._text_cache.update(zip(new, e))
@@ -106,9 +117,10 @@ def pairwise(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.linalg.norm(a[:, None, :] - b[None, :, :], axis=-1)
 
 
-def load_model(run: str | os.PathLike[str], device: str = "cpu", *,
+def load_model(run: str | os.PathLike[str], device: str = "cpu", fast: bool = True, *,
                allow_unfinished: bool = False) -> MEMScorer:
-    """Load ``RUN/best.pt`` (or a checkpoint file) as a :class:`MEMScorer` on ``device``.
+    """Load ``RUN/best.pt`` (or a checkpoint file) as a :class:`MEMScorer` on ``device``
+    (``fast=False``: states through the training path's packing on a CPU too).
 
     A run folder is checked first: finished (unless ``allow_unfinished``) and its checkpoint the
     bytes training wrote (``state.json``)."""
@@ -131,4 +143,4 @@ def load_model(run: str | os.PathLike[str], device: str = "cpu", *,
     config = path.with_name("config.json")
     if "config" not in meta and config.is_file():
         meta["config"] = json.loads(config.read_text())
-    return MEMScorer(model, meta, dev)
+    return MEMScorer(model, meta, dev, fast)

@@ -1,0 +1,95 @@
+"""The scorer's CPU fast path computes the training path's function: same distances, any batch."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from tests.mem_helpers import SMALL_SCHEMA, tiny_pairset, train_tiny  # noqa: E402
+
+from sc2data import load_model  # noqa: E402
+from sc2data._pysc2 import units  # noqa: E402
+from sc2data.model.infer import FastStateEncoder  # noqa: E402
+from sc2data.model.mem import MEM, ModelConfig, model_inputs, value_tables  # noqa: E402
+from sc2data.model.reward import MEMScorer  # noqa: E402
+from sc2data.pairs.loader import PairSet  # noqa: E402
+from sc2data.schema import Schema  # noqa: E402
+from sc2data.testing.synthetic_pairs import stacks  # noqa: E402
+
+EVENTS = ["build_supply_depot", "build_barracks", "build_scv", "train_marine",
+          "collect_minerals", None]
+WORDS = ("build", "a", "supply", "depot")
+
+
+def reference(model: MEM, arrays: dict[str, np.ndarray]) -> np.ndarray:
+    """State embeddings through the training path: numpy packing, one-hot image, the towers."""
+    with torch.no_grad():
+        return model.state(model_inputs(model, arrays, torch.device("cpu"))).numpy()
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    tmp = tmp_path_factory.mktemp("infer")
+    return train_tiny(tiny_pairset(tmp / "data"), tmp / "run", epochs=2)
+
+
+def test_trained_model_gives_the_reference_distances_at_any_batch_size(run: Path) -> None:
+    fast, slow = load_model(run), load_model(run, fast=False)
+    assert fast.fast is not None and slow.fast is None
+    with PairSet(fast.meta["config"]["data"]).packed("test") as packed:
+        batch = packed.read(0, len(packed))
+    texts = [c["text"] for c in fast.commands]
+    n = len(batch)
+    assert n > 9
+    for size in (1, 2, 3, 7, n):  # batch 1 and odd sizes
+        part = {k: v[:size] for k, v in batch.arrays.items()}
+        per = [texts[i % len(texts)] for i in range(size)]
+        np.testing.assert_allclose(fast.distance(part, per), slow.distance(part, per),
+                                   atol=1e-5, rtol=0)
+        np.testing.assert_allclose(fast.embed_states(part), reference(fast.model, part),
+                                   atol=1e-5, rtol=0)
+    np.testing.assert_allclose(fast.distances(batch, texts), slow.distances(batch, texts),
+                               atol=1e-5, rtol=0)
+    # the reference path through the scorer is the training path itself
+    np.testing.assert_array_equal(slow.embed_states(batch), reference(slow.model, batch.arrays))
+
+
+@pytest.mark.parametrize("mode", ["onehot", "embed"])
+@pytest.mark.parametrize("pool", [1, 2])
+def test_same_function_on_the_paper_layers_with_constant_unseen_and_single_id_inputs(
+        mode: str, pool: int) -> None:
+    schema = Schema.paper()
+    batch = stacks(schema, EVENTS, seed=1)
+    cfg = ModelConfig(categorical=mode, pool=pool)  # type: ignore[arg-type]
+    torch.manual_seed(0)
+    model = MEM(schema, value_tables(schema, [batch], cfg.max_table),
+                np.zeros((4, 5), np.float32), cfg).eval()
+    enc = FastStateEncoder(model.state)
+    arrays = {k: np.array(v) for k, v in batch.arrays.items()}
+    variants = {"as drawn": arrays}
+    odd = {k: v.copy() for k, v in arrays.items()}
+    odd["screen/unit_type"][0, 1, :5, :7] = units.Terran.Reaper  # an id training never saw
+    odd["screen/unit_hit_points"][:] = 45  # a scalar constant over the batch
+    odd["screen/player_relative"][:] = 1  # one id in the whole batch
+    variants["unseen, constant, single"] = odd
+    variants["blank"] = {k: np.zeros_like(v) for k, v in arrays.items()}  # nothing varies
+    with torch.inference_mode():
+        for name, a in variants.items():
+            for size in (1, 5, len(EVENTS)):
+                part = {k: v[:size] for k, v in a.items()}
+                np.testing.assert_allclose(enc(part).numpy(), reference(model, part),
+                                           atol=1e-5, rtol=0, err_msg=f"{name}, batch {size}")
+
+
+def test_scalar_encoding_keeps_the_training_path() -> None:
+    batch = stacks(SMALL_SCHEMA, EVENTS, seed=0)
+    cfg = ModelConfig(categorical="scalar")
+    model = MEM(SMALL_SCHEMA, value_tables(SMALL_SCHEMA, [batch], cfg.max_table),
+                np.zeros((4, 5), np.float32), cfg).eval()
+    scorer = MEMScorer(model, {"words": WORDS}, torch.device("cpu"))
+    assert scorer.fast is None
+    np.testing.assert_array_equal(scorer.embed_states(batch), reference(model, batch.arrays))

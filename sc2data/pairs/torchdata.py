@@ -30,9 +30,9 @@ from typing import Any
 import numpy as np
 
 from sc2data.errors import MissingDependencyError, Sc2DataError
+from sc2data.pairs.layout import packed_path
 from sc2data.pairs.loader import SPLITS, PairSet
 from sc2data.pairs.packed import BLOCK
-from sc2data.pairs.layout import packed_path
 
 try:
     import torch

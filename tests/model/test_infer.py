@@ -9,8 +9,6 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from tests.mem_helpers import SMALL_SCHEMA, tiny_pairset, train_tiny  # noqa: E402
-
 from sc2data import load_model  # noqa: E402
 from sc2data._pysc2 import units  # noqa: E402
 from sc2data.model.infer import FastStateEncoder  # noqa: E402
@@ -19,6 +17,7 @@ from sc2data.model.reward import MEMScorer  # noqa: E402
 from sc2data.pairs.loader import PairSet  # noqa: E402
 from sc2data.schema import Schema  # noqa: E402
 from sc2data.testing.synthetic_pairs import stacks  # noqa: E402
+from tests.mem_helpers import SMALL_SCHEMA, tiny_pairset, train_tiny  # noqa: E402
 
 EVENTS = ["build_supply_depot", "build_barracks", "build_scv", "train_marine",
           "collect_minerals", None]

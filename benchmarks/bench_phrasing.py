@@ -9,6 +9,7 @@ BENCHMARKS.md, "Phrasings", and the exact commands it ran.
 
     python benchmarks/bench_phrasing.py --out /tmp/phrasing            # everything, ~30 min
     python benchmarks/bench_phrasing.py --out /tmp/phrasing --epochs 10 --only lstm-base
+    python benchmarks/bench_phrasing.py --table /tmp/phrasing/runs/*   # the table alone
 """
 
 from __future__ import annotations
@@ -45,7 +46,13 @@ def main() -> None:
     ap.add_argument("--epochs", type=int, default=10)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--only", nargs="*", default=list(RUNS), choices=list(RUNS))
+    ap.add_argument("--runs", default="runs", help="Run folders go to OUT/RUNS/<run>.")
+    ap.add_argument("--table", nargs="*", metavar="RUN", help="Only print the table of these run "
+                    "folders (already trained and evaluated).")
     a = ap.parse_args()
+    if a.table:
+        print(table({Path(r).name: Path(r) for r in a.table}))
+        return
     out: Path = a.out
     out.mkdir(parents=True, exist_ok=True)
     log = out / "bench.log"
@@ -59,36 +66,39 @@ def main() -> None:
 
     train_phrases = [f"{p}={c.id}" for c in load(HERE / "phrasings.toml").commands
                      for p in c.train_paraphrases]
-    rows = []
+    runs = {}
     for name in a.only:
         encoder, pairset = RUNS[name]
-        run = out / "runs" / name
-        seconds = sh([*SC2DATA, "train", str(pairs[pairset]), "--out", str(run), "--overwrite",
-                      "--text-encoder", encoder, "--epochs", str(a.epochs), "--threads",
-                      str(a.threads), "--no-progress"], log)
+        run = runs[name] = out / a.runs / name
+        sh([*SC2DATA, "train", str(pairs[pairset]), "--out", str(run), "--overwrite",
+            "--text-encoder", encoder, "--epochs", str(a.epochs), "--threads", str(a.threads),
+            "--no-progress"], log)
         sh([*SC2DATA, "evaluate", str(run), "--device", "cpu",
             *[x for t in train_phrases for x in ("--text", t)]], log)
-        report = json.loads((run / "eval.json").read_text())
-        metrics = [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines()]
-        test = report["splits"]["test"]
-        ph = test["phrasings"]
-        rows.append((name, test["accuracy"], ph["held_out"]["mean_balanced_accuracy"],
-                     ph["held_out"]["worst"], ph["extra"]["mean_balanced_accuracy"],
-                     ph["extra"]["worst"], seconds,
-                     sum(m["seconds"] + m["val_seconds"] for m in metrics) / len(metrics),
-                     max(m["epoch"] for m in metrics if m["best"])))
-    pct = lambda x: f"{100 * x:.2f}"  # noqa: E731
     print(f"\nmachine: {platform.platform()}, {os.cpu_count()} CPUs; epochs {a.epochs}, "
           f"threads {a.threads}")
-    print("| run | test accuracy % (canonical) | held-out paraphrases, mean balanced % | worst "
-          "held-out | training phrasings, mean balanced % | worst training phrasing | train "
-          "wall s | s / epoch | best epoch |")
-    print("| --- | ---: | ---: | --- | ---: | --- | ---: | ---: | ---: |")
-    for name, acc, hm, hw, tm, tw, secs, per_epoch, best in rows:
-        print(f"| {name} | {pct(acc)} | {pct(hm)} | {hw['text']!r} {pct(hw['balanced_accuracy'])}"
-              f" | {pct(tm)} | {tw['text']!r} {pct(tw['balanced_accuracy'])} | {secs:.0f} | "
-              f"{per_epoch:.1f} | {best} |")
+    print(table(runs))
 
+
+def table(runs: dict[str, Path]) -> str:
+    """The BENCHMARKS.md table from the runs' eval.json and metrics.jsonl."""
+    pct = lambda x: f"{100 * x:.2f}"  # noqa: E731
+    lines = ["| run | test accuracy % (canonical) | held-out paraphrases: mean balanced % | worst "
+             "held-out | training phrasings: mean balanced % | worst training phrasing | "
+             "training s (train + val, all epochs) | best epoch |",
+             "| --- | ---: | ---: | --- | ---: | --- | ---: | ---: |"]
+    for name, run in runs.items():
+        test = json.loads((run / "eval.json").read_text())["splits"]["test"]
+        metrics = [json.loads(x) for x in (run / "metrics.jsonl").read_text().splitlines()]
+        held, seen = test["phrasings"]["held_out"], test["phrasings"]["extra"]
+        lines.append(
+            f"| {name} | {pct(test['accuracy'])} | {pct(held['mean_balanced_accuracy'])} | "
+            f"{held['worst']['text']!r} {pct(held['worst']['balanced_accuracy'])} | "
+            f"{pct(seen['mean_balanced_accuracy'])} | {seen['worst']['text']!r} "
+            f"{pct(seen['worst']['balanced_accuracy'])} | "
+            f"{sum(m['seconds'] + m['val_seconds'] for m in metrics):.0f} | "
+            f"{max(m['epoch'] for m in metrics if m['best'])} |")
+    return "\n".join(lines)
 
 if __name__ == "__main__":
     main()

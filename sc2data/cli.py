@@ -325,12 +325,14 @@ def evaluate_cmd(
     run: Path = typer.Argument(..., help="Run folder (sc2data train --out)."),
     data: Optional[Path] = typer.Option(None, help="Pair-set folder [default: the run's]."),
     device: str = typer.Option("auto", help="auto, cpu or cuda."),
+    text: list[str] = typer.Option([], "--text", help="A phrasing to measure, as "
+                                   "\"PHRASE=command_id\" (repeatable)."),
     allow_unfinished: bool = typer.Option(False, help="Evaluate a run that did not finish."),
 ) -> None:
-    """Accuracy (beside the paper's), ROC-AUC, retrieval, paraphrases; writes RUN/eval.json."""
+    """Accuracy (beside the paper's), ROC-AUC, retrieval, phrasings; writes RUN/eval.json."""
     from sc2data.model.evaluate import evaluate, format_report
 
-    report = evaluate(run, data, device, allow_unfinished)
+    report = evaluate(run, data, device, text, allow_unfinished)
     typer.echo(format_report(report))
     typer.echo(f"wrote {Path(run) / 'eval.json'}")
 
@@ -341,7 +343,8 @@ def tsne_cmd(
     data: Optional[Path] = typer.Option(None, help="Pair-set folder [default: the run's]."),
     out: Optional[Path] = typer.Option(None, help="PNG path [default: RUN/tsne.png]."),
     states: int = typer.Option(2000, min=1, help="Test states to plot (a random sample)."),
-    text: list[str] = typer.Option([], "--text", help="Extra command text to mark (repeatable)."),
+    text: list[str] = typer.Option([], "--text", help="Extra command text to mark, "
+                                   "\"PHRASE\" or \"PHRASE=command_id\" (repeatable)."),
     seed: int = typer.Option(0, help="Seed of the sample and of t-SNE."),
     device: str = typer.Option("auto", help="auto, cpu or cuda."),
     allow_unfinished: bool = typer.Option(False, help="Draw a run that did not finish."),

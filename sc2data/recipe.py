@@ -13,8 +13,9 @@ wrong type or an impossible count is an error that names the field. Example (the
     layers = "paper"
 
     [commands.build_supply_depot]      # one table per command; the id is the rule id
-    text = "build a supply depot"
-    paraphrases = ["construct a supply depot"]   # held out: evaluation only
+    text = "build a supply depot"      # canonical: the rule's own command text
+    train_paraphrases = ["build supply", "make a depot"]  # trained on (see sc2data.pairs.draw)
+    paraphrases = ["construct a depot"]                   # held out: evaluation only
 
     [pairs]
     states_per_command = 10000         # matched pairs per command (and as many mismatched)
@@ -75,11 +76,20 @@ class RolloutSpec:
 
 @dataclass(frozen=True)
 class Command:
-    """A command: the rule that labels it, its canonical text, its held-out paraphrases."""
+    """A command: the rule that labels it, its canonical text, its held-out paraphrases (never
+    trained on) and its training phrasings (drawn for training pairs beside the canonical text)."""
 
     id: str
     text: str
     paraphrases: tuple[str, ...] = ()
+    train_paraphrases: tuple[str, ...] = ()
+
+
+def phrase_key(text: str) -> str:
+    """What makes two phrases the same: their lower-cased words and numbers, in order. Both text
+    encoders ignore case, and the word-vector one punctuation, so "Make a depot!" is "make a
+    depot" — a held-out paraphrase that differs from a training phrase only so is no test."""
+    return " ".join(re.findall(r"[a-z0-9]+", text.lower()))
 
 
 @dataclass(frozen=True)
@@ -121,6 +131,9 @@ class Recipe:
         """JSON-able form recorded in every manifest and pair set (``source`` left out)."""
         d = asdict(self)
         d.pop("source")
+        for c in d["commands"]:  # absent when empty: older recipes keep their identity
+            if not c["train_paraphrases"]:
+                del c["train_paraphrases"]
         return d
 
 
@@ -205,22 +218,19 @@ def parse(data: Mapping[str, Any], source: str = "<recipe>") -> Recipe:
         where = f"{w} [commands.{cid}]"
         if not isinstance(c, dict):
             raise RecipeError(f"{where} must be a table with text = \"...\"")
-        _check_keys(where, c, {"text": str, "paraphrases": list}, required=("text",))
-        paraphrases = c.get("paraphrases", [])
-        if not all(isinstance(p, str) and p.strip() for p in paraphrases):
-            raise RecipeError(f"{where}.paraphrases must be a list of non-empty strings")
+        _check_keys(where, c, {"text": str, "paraphrases": list, "train_paraphrases": list},
+                    required=("text",))
         _text(f"{where}.text", c["text"])
-        for p in paraphrases:
-            _text(f"{where}.paraphrases", p)
-        commands.append(Command(cid, c["text"], tuple(paraphrases)))
-    seen: dict[str, str] = {}
-    for c in commands:  # one text means one command: a duplicate would be a match and a mismatch
-        for text in (c.text, *c.paraphrases):
-            key = " ".join(text.lower().split())
-            if key in seen:
-                raise RecipeError(f"{w} [commands.{c.id}]: the text {text!r} is also given for "
-                                  f"{seen[key]}; each text names one command once")
-            seen[key] = f"[commands.{c.id}]"
+        lists = {k: c.get(k, []) for k in ("train_paraphrases", "paraphrases")}
+        for key, phrases in lists.items():
+            for p in phrases:
+                if not isinstance(p, str) or not phrase_key(p):
+                    raise RecipeError(f"{where}.{key} must be a list of phrases with at least "
+                                      f"one word each; got {p!r}")
+                _text(f"{where}.{key}", p)
+        commands.append(Command(cid, c["text"], tuple(lists["paraphrases"]),
+                                tuple(lists["train_paraphrases"])))
+    _check_phrases(w, commands)
 
     p = data["pairs"]
     _check_keys(f"{w} [pairs]", p, {"states_per_command": int, "null_states": int,
@@ -254,6 +264,24 @@ def parse(data: Mapping[str, Any], source: str = "<recipe>") -> Recipe:
     return Recipe(name=data["name"], seed=data["seed"], rollout=rollout, commands=tuple(commands),
                   pairs=pairs, split=split, description=data.get("description", ""),
                   source=source)
+
+
+def _check_phrases(where: str, commands: Sequence[Command]) -> None:
+    """Every phrase (canonical, training, held-out) belongs to one command and one role: a
+    held-out paraphrase that is also trained on would measure nothing, and a phrase given to two
+    commands would teach the model a contradiction. Phrases compare by :func:`phrase_key`."""
+    seen: dict[str, tuple[str, str, str]] = {}  # key → (command id, list name, phrase)
+    for c in commands:
+        named = [(c.text, "text"), *((p, "train_paraphrases") for p in c.train_paraphrases),
+                 *((p, "paraphrases") for p in c.paraphrases)]
+        for phrase, role in named:
+            key = phrase_key(phrase)
+            if key in seen:
+                cid, other, first = seen[key]
+                same = f"{other} {first!r}" + ("" if cid == c.id else f" of {cid}")
+                raise RecipeError(f"{where} [commands.{c.id}].{role}: {phrase!r} is already "
+                                  f"{same}; a phrase can be in only one list of one command")
+            seen[key] = (c.id, role, phrase)
 
 
 def apportion(total: int, fractions: Sequence[float]) -> list[int]:

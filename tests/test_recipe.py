@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import json
 from pathlib import Path
 from typing import Any
 
@@ -65,7 +66,20 @@ def test_parse_reads_every_field() -> None:
     ("split.train", 0.9, "must be positive and sum to 1"),
     ("split.method", "stratified", "[split].method must be one of episode, random"),
     ("commands.build_scv.text", 5, "[commands.build_scv].text must be str"),
-    ("commands.build_scv.paraphrases", [""], "paraphrases must be a list of non-empty strings"),
+    ("commands.build_scv.paraphrases", [""], ".paraphrases must be a list of phrases with at "
+     "least one word each; got ''"),
+    ("commands.build_scv.train_paraphrases", ["train a worker", "  "],
+     ".train_paraphrases must be a list of phrases with at least one word each; got '  '"),
+    ("commands.build_scv.train_paraphrases", ["?!"], "got '?!'"),
+    ("commands.build_scv.train_paraphrases", "train a worker", ".train_paraphrases must be list"),
+    ("commands.build_scv.train_paraphrases", ["Make a worker!"],
+     "[commands.build_scv].paraphrases: 'make a worker' is already train_paraphrases "
+     "'Make a worker!'; a phrase can be in only one list of one command"),
+    ("commands.build_scv.train_paraphrases", ["build an scv"],
+     "[commands.build_scv].train_paraphrases: 'build an scv' is already text 'build an SCV'"),
+    ("commands.train_marine.paraphrases", ["make a worker"],
+     "[commands.train_marine].paraphrases: 'make a worker' is already paraphrases "
+     "'make a worker' of build_scv"),
     ("commands", {"build_scv": {"text": "x"}}, "at least two commands"),
     ("seed", ..., "missing required key 'seed'"),
     ("pairs", {"states_per_command": 1, "null_states": 0},
@@ -77,6 +91,27 @@ def test_malformed_recipe_names_the_field(path: str, value: Any, message: str) -
     assert message in str(e.value)
     assert str(e.value).startswith("r.toml")
     assert "\n" not in str(e.value)
+
+
+def test_training_phrasings_are_kept_apart_and_absent_from_an_old_recipes_identity() -> None:
+    d = with_("commands.build_scv.train_paraphrases", ["train a worker", "make an scv"])
+    r = parse(d)
+    assert r.commands[0].train_paraphrases == ("train a worker", "make an scv")
+    assert r.commands[0].paraphrases == ("make a worker",)
+    assert json.loads(json.dumps(r.to_dict()))["commands"][0]["train_paraphrases"] == [
+        "train a worker", "make an scv"]
+    # a recipe without the key records exactly what it recorded before the key existed
+    old = json.loads(json.dumps(parse(BASE).to_dict()))["commands"]
+    assert old == [{"id": "build_scv", "text": "build an SCV", "paraphrases": ["make a worker"]},
+                   {"id": "train_marine", "text": "train a marine", "paraphrases": []}]
+
+
+def test_shipped_recipes_train_on_player_phrasings_and_hold_out_others() -> None:
+    for path in MANIFESTS.glob("*.toml"):
+        for c in load(path).commands:
+            assert len(c.train_paraphrases) >= 3 and len(c.paraphrases) >= 3, (path, c.id)
+    scv = load(MANIFESTS / "buildmarines-paper.toml").commands[0]
+    assert "train a worker" in scv.train_paraphrases and "make an scv" in scv.train_paraphrases
 
 
 def test_random_split_apportions_pairs_after_drawing() -> None:

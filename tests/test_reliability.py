@@ -28,8 +28,9 @@ def _recipe(tmp_path: Path, old: str, new: str) -> Path:
     ("episodes = 20", "episodes = 1000000000000", ["episodes must be at most 1,000,000"]),
     ("train = 0.666667", "train = nan", ["train, val and test must be positive"]),
     ('text = "train a marine"', f'text = "{"word " * 20000}"', ["characters long"]),
-    ('paraphrases = ["produce a marine", "make a soldier"]',
-     'paraphrases = ["produce a marine", "build an SCV"]', ["'build an SCV' is also given"]),
+    ('paraphrases = ["make a soldier", "recruit a marine", "build a marine"]',
+     'paraphrases = ["make a soldier", "recruit a marine", "build an SCV"]',
+     ["'build an SCV' is already text of build_scv"]),
 ])
 def test_hostile_recipe_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                     old: str, new: str, needles: list[str]) -> None:

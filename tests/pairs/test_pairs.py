@@ -99,3 +99,65 @@ def test_too_few_positives_says_how_many_and_how_much_more() -> None:
 def test_episode_split_needs_three_episodes() -> None:
     with pytest.raises(NotEnoughStates, match="at least 3 episodes"):
         build_pairs(recipe(), labelled(episodes=2, steps=2000))
+
+
+# --- training phrasings
+
+TRAIN_PHRASES = ["train a worker", "make an scv", "build a worker"]
+
+
+def phrased(method: str = "episode") -> Any:
+    d = copy.deepcopy(BASE)
+    d["split"]["method"] = method
+    d["commands"]["build_scv"]["train_paraphrases"] = TRAIN_PHRASES
+    return parse(d)
+
+
+@pytest.mark.parametrize("method,digest", [
+    ("episode", "17cc0ed631eadd8c44150ffa19f1af5c53afb85882dd1a3d748ac4c975a35798"),
+    ("random", "fcc9cd5130ba014777bc9b5efed396c5bf521cd12d822eadc6de608c6e848ce4"),
+])
+def test_a_recipe_without_training_phrasings_draws_the_pairs_it_always_did(method: str,
+                                                                            digest: str) -> None:
+    """The digests were computed by the code before training phrasings existed."""
+    import hashlib
+    import json
+
+    t = build_pairs(recipe(split__method=method), labelled()).to_pydict()
+    assert hashlib.sha256(json.dumps(t, sort_keys=True).encode()).hexdigest() == digest
+
+
+@pytest.mark.parametrize("method", ["episode", "random"])
+def test_training_phrasings_change_only_the_train_splits_texts(method: str) -> None:
+    plain = build_pairs(recipe(split__method=method), labelled()).to_pydict()
+    t = build_pairs(phrased(method), labelled()).to_pydict()
+    assert {k: v for k, v in t.items() if k != "command"} == \
+        {k: v for k, v in plain.items() if k != "command"}
+    drawn: list[str] = []
+    for split, cid, text, canon in zip(t["split"], t["command_id"], t["command"],
+                                       plain["command"]):
+        if split != "train" or cid != "build_scv":
+            assert text == canon  # val and test (and a command without phrasings): canonical
+        else:
+            assert text in ["build an SCV", *TRAIN_PHRASES]
+            drawn.append(text)
+    assert "make a worker" not in t["command"]  # the held-out paraphrase is never drawn
+    assert "build an SCV" in drawn and set(drawn) & set(TRAIN_PHRASES)
+
+
+def test_training_phrasings_are_drawn_half_canonical_and_deterministically() -> None:
+    d = copy.deepcopy(BASE)
+    d["pairs"] = {"states_per_command": 400, "null_states": 400}
+    d["commands"]["build_scv"]["train_paraphrases"] = TRAIN_PHRASES
+    data = labelled(episodes=40, steps=1000)
+    t = build_pairs(parse(d), data).to_pydict()
+    assert build_pairs(parse(d), data).to_pydict() == t
+    texts = [x for s, c, x in zip(t["split"], t["command_id"], t["command"])
+             if s == "train" and c == "build_scv"]
+    share = texts.count("build an SCV") / len(texts)
+    assert 0.45 < share < 0.55, share
+    for p in TRAIN_PHRASES:  # the other half, uniformly over the phrasings
+        assert abs(texts.count(p) / len(texts) - 0.5 / len(TRAIN_PHRASES)) < 0.05
+    d["seed"] = 4
+    other = build_pairs(parse(d), data).to_pydict()["command"]
+    assert other != t["command"]

@@ -223,3 +223,46 @@ def test_info_describes_every_folder(built: Path, tmp_path: Path) -> None:
     p = run("info", tmp_path, ok=False)
     assert p.returncode == 2 and "not a dataset (sc2data rollout), pair set" in p.stderr
     assert run("--version").stdout.startswith("sc2data ")
+
+
+def _without_training_phrasings(folder: Path, **changes: str) -> Path:
+    path = recipe_file(folder, **changes)
+    path.write_text("".join(l for l in path.read_text().splitlines(keepends=True)
+                            if not l.startswith("train_paraphrases")))
+    return path
+
+
+def test_training_phrasings_change_only_the_train_texts_of_the_same_pairs(
+        built: Path, tmp_path: Path) -> None:
+    plain = _without_training_phrasings(tmp_path, episodes="3", states_per_command="3",
+                                        null_states="12")
+    run("pair", plain, "--data", built / "rollout", "--out", tmp_path / "plain", "--no-progress")
+    a = pq.read_table(tmp_path / "plain" / "pairs.parquet").to_pydict()
+    b = pq.read_table(built / "pairs" / "pairs.parquet").to_pydict()
+    assert {k: v for k, v in a.items() if k != "command"} == \
+        {k: v for k, v in b.items() if k != "command"}
+    recipe = tomllib.loads(RECIPE)["commands"]
+    held = {p for c in recipe.values() for p in c["paraphrases"]}
+    for split, cid, text, canon in zip(b["split"], b["command_id"], b["command"], a["command"]):
+        assert text not in held
+        if split == "train":
+            assert text in [recipe[cid]["text"], *recipe[cid]["train_paraphrases"]]
+        else:
+            assert text == canon == recipe[cid]["text"]
+    meta = json.loads((built / "pairs" / "pairset.json").read_text())
+    assert meta["commands"][0]["train_paraphrases"] == recipe["build_scv"]["train_paraphrases"]
+    assert "train_paraphrases" not in meta["identity"]["recipe"]["commands"][0] or \
+        meta["identity"]["recipe"]["commands"][0]["train_paraphrases"]
+    old = json.loads((tmp_path / "plain" / "pairset.json").read_text())
+    assert "train_paraphrases" not in old["identity"]["recipe"]["commands"][0]
+
+
+def test_a_phrase_in_both_lists_stops_pair_with_one_line(built: Path, tmp_path: Path) -> None:
+    path = recipe_file(tmp_path, episodes="3", states_per_command="3", null_states="12")
+    path.write_text(path.read_text().replace('paraphrases = ["construct an scv"',
+                                             'paraphrases = ["make an scv"', 1))
+    p = run("pair", path, "--data", built / "rollout", "--out", tmp_path / "p", ok=False)
+    assert p.returncode != 0 and "Traceback" not in p.stderr
+    assert p.stderr.strip().count("\n") == 0
+    assert "'make an scv' is already train_paraphrases 'make an scv'" in p.stderr
+    assert not (tmp_path / "p").exists()

@@ -30,7 +30,7 @@ def _recipe(tmp_path: Path, old: str, new: str) -> Path:
     ('text = "train a marine"', f'text = "{"word " * 20000}"', ["characters long"]),
     ('paraphrases = ["make a soldier", "recruit a marine", "build a marine"]',
      'paraphrases = ["make a soldier", "recruit a marine", "build an SCV"]',
-     ["'build an SCV' is already text of build_scv"]),
+     ["'build an SCV' is already text 'build an SCV' of build_scv"]),
 ])
 def test_hostile_recipe_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                     old: str, new: str, needles: list[str]) -> None:

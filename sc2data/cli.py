@@ -43,6 +43,7 @@ def version() -> None:
 rules_app = typer.Typer(help="Labelling rules: built-in, from plugins and from --rules-dir.",
                         no_args_is_help=True, rich_markup_mode=None)
 app.add_typer(rules_app, name="rules")
+app.add_typer(__import__("sc2data.rl.cli", fromlist=["app"]).app, name="rl")
 
 _RULES_DIR_HELP = "Also load the rules defined by the .py files of this folder."
 

@@ -7,14 +7,18 @@ default; ``backend="sc2"`` is the real game through pysc2) behind gymnasium's ``
   barracks, train a marine, send idle workers to mine, no-op — each played out as pysc2
   ``FunctionCall``s by the reduced-random agent's own macro code
   (:meth:`sc2data.game.agents.ReducedRandomAgent.macro`), with its random choices (which SCV,
-  which free spot, which barracks) drawn from the episode's seeded generator.
+  which free spot, which barracks) drawn from the episode's seeded generator. As that agent
+  does, a macro that costs minerals first waits for them (``no_op`` steps, up to
+  ``ReducedRandomAgent.PATIENCE`` = 60, then gives up): without saving up, a policy that spends
+  whenever it can is too poor ever to afford a barracks (a masked uniform random policy made no
+  marine in a full episode so).
 * ``action_space="paper"``: ``MultiDiscrete([len(PAPER_FUNCTIONS), 64, 64])`` — a function of
   the reduced pysc2 set :data:`PAPER_FUNCTIONS` and one screen point ``(x, y)``; the remaining
   arguments are fixed (see :func:`paper_call`).
 
 Counting. One gymnasium step is one *decision*. A paper decision is exactly one pysc2 step (8
-game loops at step_mul 8). A macro decision takes as many pysc2 steps as it sends calls — 1 to
-3 (select, then command; gather selects idle workers, then orders them) — and at least one: a
+game loops at step_mul 8). A macro decision takes as many pysc2 steps as it waits and sends
+calls — the waiting for minerals, then 1 to 2 calls (select, then command) — and at least one: a
 macro that sends nothing (its first call is unavailable) plays one ``no_op`` so that time always
 advances. ``info["env_steps"]`` says how many pysc2 steps the decision took and
 ``info["game_loop"]`` the game time after it; learning curves are drawn against pysc2 steps so
@@ -26,9 +30,9 @@ An episode ends (``terminated``) when the game's timer does (1,800 pysc2 steps o
 Masks. :meth:`BuildMarinesGym.action_masks` follows sb3-contrib's ``MaskablePPO`` protocol. For
 the paper space it is pysc2's ``available_actions`` over :data:`PAPER_FUNCTIONS` followed by all
 64 x and all 64 y values (MultiDiscrete masks are per-dimension masks laid end to end). For the
-macro space it is what the observation says can be done now: minerals for the cost, free supply,
-the units the macro selects, free ground for a building, a completed depot for a barracks, an idle
-worker to send. A call that is unavailable is never sent: a masked-out action (from an agent that
+macro space it is what the observation says can be started now: free supply, the units the
+macro selects, free ground for a building, a completed depot for a barracks, an idle worker to
+send (minerals are waited for, not masked). A call that is unavailable is never sent: a masked-out action (from an agent that
 ignores the mask) plays ``no_op`` instead, with ``info["invalid"] = True``, and a macro whose next
 call turns out unavailable (say, a barracks still under construction cannot train) ends there.
 
@@ -109,18 +113,16 @@ def paper_call(index: int, x: int, y: int) -> actions.FunctionCall:
 
 def macro_feasible(v: ScreenView) -> np.ndarray:
     """``(6,)`` bool, in :data:`MACROS` order: which macros the observation says can start now."""
-    minerals = int(v.player[_P.minerals])
     free = int(v.player[_P.food_cap]) - int(v.player[_P.food_used])
     cc = v.own(_T.CommandCenter)
     has_scv = bool(v.own(_T.SCV).any())
     n_cc = max(1, len(v.blobs(cc)))
     depot_done = int(v.player[_P.food_cap]) > 15 * n_cc  # a finished depot raises the cap
     ok = {
-        "train_scv": bool(cc.any()) and minerals >= 50 and free >= 1,
-        "build_supply_depot": has_scv and minerals >= 100 and bool(v.placements(2).any()),
-        "build_barracks": (has_scv and minerals >= 150 and depot_done
-                           and bool(v.placements(3).any())),
-        "train_marine": bool(v.own(_T.Barracks).any()) and minerals >= 50 and free >= 1,
+        "train_scv": bool(cc.any()) and free >= 1,
+        "build_supply_depot": has_scv and bool(v.placements(2).any()),
+        "build_barracks": has_scv and depot_done and bool(v.placements(3).any()),
+        "train_marine": bool(v.own(_T.Barracks).any()) and free >= 1,
         "gather": int(v.player[_P.idle_worker_count]) > 0,
         "no_op": True,
     }
@@ -243,7 +245,9 @@ class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
         agent = self._expander
         agent.view = self._view
         reward = 0.0
-        for call in agent.macro(name):
+        macro = agent.macro(name)
+        cost = agent.COST.get(name, 0)
+        for call in agent.save_up(cost, macro, agent.PATIENCE) if cost else macro:
             if not self._view.can(call):  # type: ignore[union-attr]
                 break
             reward += self._send(call)

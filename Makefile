@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 BIN    := $(VENV)/bin
 DEMO   ?= demo-out
 
-.PHONY: demo test bench clean
+.PHONY: demo rl-demo test bench clean
 
 # One stamp per dependency set: rebuilt when pyproject.toml changes.
 $(VENV)/.stamp: pyproject.toml
@@ -16,6 +16,12 @@ $(VENV)/.stamp: pyproject.toml
 
 demo: $(VENV)/.stamp
 	SC2DATA=$(BIN)/sc2data bash scripts/demo.sh $(DEMO)
+
+# After `make demo`: a narration-shaped MaskablePPO agent from the demo's MEM (a few minutes).
+rl-demo: $(VENV)/.stamp
+	$(BIN)/sc2data rl train --reward narration --mem $(DEMO)/run --steps 2048 --out $(DEMO)/rl-narration
+	$(BIN)/sc2data rl evaluate $(DEMO)/rl-narration --episodes 3
+	$(BIN)/sc2data rl plot $(DEMO)/rl-narration --out $(DEMO)/rl-curves.png
 
 test: $(VENV)/.stamp
 	$(PY) -m pytest -q

@@ -15,6 +15,7 @@ import typer
 from sc2data.cliopts import OptionGroup, config_options, option, with_options
 from sc2data.errors import Sc2DataError
 from sc2data.model.train import TrainConfig
+from sc2data.rl.cli import app as rl_app
 
 app = typer.Typer(
     name="sc2data",
@@ -53,6 +54,7 @@ def version() -> None:
 rules_app = typer.Typer(help="Labelling rules: built-in, from plugins and from --rules-dir.",
                         no_args_is_help=True, rich_markup_mode=None)
 app.add_typer(rules_app, name="rules")
+app.add_typer(rl_app, name="rl")
 
 _RULES_DIR_HELP = "Also load the rules defined by the .py files of this folder."
 

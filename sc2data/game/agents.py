@@ -218,6 +218,19 @@ class ReducedRandomAgent(MacroAgent):
 
     def next_macro(self) -> Macro:
         name = self.MACROS[int(self.rng.integers(len(self.MACROS)))]
+        macro = self.macro(name)
+        cost = self.COST.get(name, 0)
+        return self.save_up(cost, macro, self.PATIENCE) if cost else macro
+
+    def macro(self, name: str) -> Macro:
+        """Macro ``name`` (one of :attr:`MACROS`) played out from the current view, at once.
+
+        Random choices (which SCV builds, where, which barracks trains) come from ``self.rng``.
+        ``self.view`` must be set to the observation before each call is drawn, as :meth:`step`
+        does; the gymnasium environments of ``sc2data.rl`` drive macros this way.
+        """
+        if name not in self.MACROS:
+            raise Sc2DataError(f"unknown macro {name!r}; choose one of: {', '.join(self.MACROS)}")
         v = self._v()
         if name == "build_supply_depot":
             macro = self.build(_F.Build_SupplyDepot_screen, _random_spot(self.rng), 2)
@@ -227,8 +240,7 @@ class ReducedRandomAgent(MacroAgent):
             macro = self.train_marine(v.random_pixel(v.own(units.Terran.Barracks), self.rng))
         else:
             macro = getattr(self, name)()
-        cost = self.COST.get(name, 0)
-        return self.save_up(cost, macro, self.PATIENCE) if cost else macro
+        return macro
 
 
 class ScriptedAgent(MacroAgent):

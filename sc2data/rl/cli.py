@@ -1,0 +1,88 @@
+"""``sc2data rl …``: train, evaluate and plot narration-guided (or unshaped) agents.
+
+Heavy packages (gymnasium, stable-baselines3, torch) are imported inside the commands, so
+``sc2data --help`` stays fast and a missing ``rl`` extra is a one-line error naming it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+app = typer.Typer(help="Reinforcement learning on BuildMarines: sparse, rule-shaped or "
+                       "narration-shaped rewards (MaskablePPO).",
+                  no_args_is_help=True, rich_markup_mode=None)
+
+
+@app.command("train")
+def train_cmd(
+    out: Path = typer.Option(..., "--out", help="Run folder (rerun the same command to resume)."),
+    action_space: str = typer.Option("macro", "--action-space",
+                                     help="macro (6 macro actions) or paper (pysc2 function + "
+                                          "screen point)."),
+    reward: str = typer.Option("sparse", "--reward", help="sparse, rules or narration."),
+    narration: Optional[Path] = typer.Option(
+        None, "--narration", help="Narration file (TOML or one command per line) [default: the "
+                                  "shipped BuildMarines narration]."),
+    mem: Optional[Path] = typer.Option(None, "--mem", help="Trained MEM run (sc2data train "
+                                                            "--out), for --reward narration."),
+    steps: int = typer.Option(10_000, "--steps", help="Decisions to train for, over all envs."),
+    envs: int = typer.Option(1, "--envs", help="Parallel environments (subprocesses if > 1)."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the policy and the environments."),
+    bonus: Optional[float] = typer.Option(
+        None, "--bonus", help="Shaping bonus: per rule firing (rules) [0.1] or per matched "
+                              "command (narration) [1.0]."),
+    threshold: float = typer.Option(0.5, "--threshold",
+                                    help="MEM distance below which a command is matched."),
+    patience: int = typer.Option(0, "--patience", help="Skip a narration command not matched "
+                                                       "within this many decisions (0: never)."),
+    episode_steps: Optional[int] = typer.Option(
+        None, "--episode-steps", help="pysc2 steps per episode on the simulator [1800]."),
+    rollout: int = typer.Option(256, "--rollout", help="PPO rollout length per env."),
+    batch_size: int = typer.Option(64, "--batch-size", help="PPO minibatch size."),
+    checkpoint_every: int = typer.Option(2048, "--checkpoint-every",
+                                         help="Decisions between checkpoints."),
+    progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",
+                                            help="Progress bar [default: on a terminal]."),
+) -> None:
+    """Train a MaskablePPO agent; writes checkpoints and the learning curve (curve.csv/json)."""
+    from sc2data.rl.train import RLConfig, require_rl, train
+
+    require_rl("sc2data rl train")
+    cfg = RLConfig(out=str(out), action_space=action_space, reward=reward,
+                   narration=None if narration is None else str(narration),
+                   mem=None if mem is None else str(mem), steps=steps, envs=envs, seed=seed,
+                   bonus=bonus, threshold=threshold, patience=patience,
+                   episode_steps=episode_steps, rollout=rollout, batch_size=batch_size,
+                   checkpoint_every=checkpoint_every, progress=progress)
+    typer.echo(f"trained {train(cfg)}")
+
+
+@app.command("evaluate")
+def evaluate_cmd(
+    run: Path = typer.Argument(..., help="Run folder of sc2data rl train."),
+    episodes: int = typer.Option(10, "--episodes", help="Seeded episodes never used in training."),
+    stochastic: bool = typer.Option(False, "--stochastic",
+                                    help="Sample actions instead of the most likely one."),
+    progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",
+                                            help="Progress bar [default: on a terminal]."),
+) -> None:
+    """Marines per episode (the game's score), mean ± std; writes RUN/eval.json."""
+    from sc2data.rl.train import evaluate, require_rl, summary
+
+    require_rl("sc2data rl evaluate")
+    typer.echo(summary(evaluate(run, episodes, not stochastic, progress)))
+
+
+@app.command("plot")
+def plot_cmd(
+    runs: list[Path] = typer.Argument(..., help="Run folders to draw in one figure."),
+    out: Path = typer.Option(..., "--out", help="PNG file to write."),
+    window: int = typer.Option(10, "--window", help="Episodes per rolling mean."),
+) -> None:
+    """Learning curves (marines per episode against pysc2 steps) of several runs in one PNG."""
+    from sc2data.rl.train import plot
+
+    typer.echo(f"wrote {plot(runs, out, window)}")

@@ -1,0 +1,269 @@
+"""Gymnasium environments over BuildMarines: a macro action space and the paper's pysc2 space.
+
+:class:`BuildMarinesGym` wraps :func:`sc2data.game.env.make_env` (the embedded simulator by
+default; ``backend="sc2"`` is the real game through pysc2) behind gymnasium's ``Env`` API:
+
+* ``action_space="macro"``: ``Discrete(6)`` — train an SCV, build a supply depot, build a
+  barracks, train a marine, send idle workers to mine, no-op — each played out as pysc2
+  ``FunctionCall``s by the reduced-random agent's own macro code
+  (:meth:`sc2data.game.agents.ReducedRandomAgent.macro`), with its random choices (which SCV,
+  which free spot, which barracks) drawn from the episode's seeded generator. As that agent
+  does, a macro that costs minerals first waits for them (``no_op`` steps, up to
+  ``ReducedRandomAgent.PATIENCE`` = 60, then gives up): without saving up, a policy that spends
+  whenever it can is too poor ever to afford a barracks (a masked uniform random policy made no
+  marine in a full episode so).
+* ``action_space="paper"``: ``MultiDiscrete([len(PAPER_FUNCTIONS), 64, 64])`` — a function of
+  the reduced pysc2 set :data:`PAPER_FUNCTIONS` and one screen point ``(x, y)``; the remaining
+  arguments are fixed (see :func:`paper_call`).
+
+Counting. One gymnasium step is one *decision*. A paper decision is exactly one pysc2 step (8
+game loops at step_mul 8). A macro decision takes as many pysc2 steps as it waits and sends
+calls — the waiting for minerals, then 1 to 2 calls (select, then command) — and at least one: a
+macro that sends nothing (its first call is unavailable) plays one ``no_op`` so that time always
+advances. ``info["env_steps"]`` says how many pysc2 steps the decision took and
+``info["game_loop"]`` the game time after it; learning curves are drawn against pysc2 steps so
+that both spaces are compared on the same clock. The reward is the sum of the game's rewards
+(+1 per marine made) over those pysc2 steps; ``info["game_reward"]`` carries the same number.
+An episode ends (``terminated``) when the game's timer does (1,800 pysc2 steps on the real map;
+``game_loops`` shortens it on the simulator).
+
+Masks. :meth:`BuildMarinesGym.action_masks` follows sb3-contrib's ``MaskablePPO`` protocol. For
+the paper space it is pysc2's ``available_actions`` over :data:`PAPER_FUNCTIONS` followed by all
+64 x and all 64 y values (MultiDiscrete masks are per-dimension masks laid end to end). For the
+macro space it is what the observation says can be started now: free supply, the units the
+macro selects, free ground for a building, a completed depot for a barracks, an idle worker to
+send (minerals are waited for, not masked). A call that is unavailable is never sent: a masked-out action (from an agent that
+ignores the mask) plays ``no_op`` instead, with ``info["invalid"] = True``, and a macro whose next
+call turns out unavailable (say, a barracks still under construction cannot train) ends there.
+
+Observations: a ``Dict`` with one ``Box`` per key of the schema (``Schema.named(layers)``, the
+paper's 13 screen + 7 minimap layers by default) in the stored dtypes, plus its non-spatial
+vectors (``player``, ``score_cumulative``, ``game_loop``) — exactly what ``Schema.extract``
+stores for a frame. The raw pysc2 observations of the last decision are kept in
+:attr:`BuildMarinesGym.frames` for the reward wrappers (never put in ``info``, which vector envs
+pickle every step).
+
+Seeding: ``reset(seed=s)`` seeds gymnasium's ``np_random``; each episode then draws the
+simulator's seed and the macro generator's seed from it, so the same seed and the same actions
+give the same trajectory, and ``reset()`` without a seed plays the next episode of that stream.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from sc2data._pysc2 import actions, features, units
+from sc2data.errors import Sc2DataError
+from sc2data.game.agents import ReducedRandomAgent
+from sc2data.game.env import make_env
+from sc2data.game.screen import ScreenView
+from sc2data.schema import Schema
+from sc2data.vocab import SCREEN_SIZE, STEP_MUL
+
+ACTION_SPACES: tuple[str, ...] = ("macro", "paper")
+
+MACROS: tuple[str, ...] = ReducedRandomAgent.MACROS
+"""The macro actions, in action-index order (the reduced-random agent's set)."""
+
+PAPER_FUNCTIONS: tuple[str, ...] = (
+    "no_op", "select_point", "select_rect", "select_idle_worker", "select_army",
+    "Build_SupplyDepot_screen", "Build_Barracks_screen", "Train_SCV_quick", "Train_Marine_quick",
+    "Harvest_Gather_screen",
+)
+"""The reduced pysc2 function set of the paper action space, in action-index order."""
+
+RECT_HALF = 4
+"""``select_rect`` selects the box of ±4 pixels around the chosen point (one point, not two)."""
+
+_F = actions.FUNCTIONS
+_P = features.Player
+_T = units.Terran
+NO_OP = _F.no_op()
+_PAPER_IDS = tuple(int(_F[name].id) for name in PAPER_FUNCTIONS)
+
+_FIXED_ARGS: dict[str, list[int]] = {
+    "queued": [0],            # now, not shift-queued
+    "select_point_act": [0],  # select (not toggle / all of type)
+    "select_add": [0],        # replace the selection
+    "select_worker": [2],     # select_all idle workers
+}
+
+
+def paper_call(index: int, x: int, y: int) -> actions.FunctionCall:
+    """The pysc2 call of paper action ``(index, x, y)``: screen arguments from the point, the rest
+    fixed (act now, replace the selection, all idle workers)."""
+    func = _F[_PAPER_IDS[index]]
+    args: list[list[int]] = []
+    for arg in func.args:
+        if arg.name == "screen" and func.name == "select_rect":
+            args.append([max(0, x - RECT_HALF), max(0, y - RECT_HALF)])
+        elif arg.name == "screen":
+            args.append([x, y])
+        elif arg.name == "screen2":
+            last = SCREEN_SIZE - 1
+            args.append([min(last, x + RECT_HALF), min(last, y + RECT_HALF)])
+        else:
+            args.append(_FIXED_ARGS[arg.name])
+    return actions.FunctionCall(func.id, args)
+
+
+def macro_feasible(v: ScreenView) -> np.ndarray:
+    """``(6,)`` bool, in :data:`MACROS` order: which macros the observation says can start now."""
+    free = int(v.player[_P.food_cap]) - int(v.player[_P.food_used])
+    cc = v.own(_T.CommandCenter)
+    has_scv = bool(v.own(_T.SCV).any())
+    n_cc = max(1, len(v.blobs(cc)))
+    depot_done = int(v.player[_P.food_cap]) > 15 * n_cc  # a finished depot raises the cap
+    ok = {
+        "train_scv": bool(cc.any()) and free >= 1,
+        "build_supply_depot": has_scv and bool(v.placements(2).any()),
+        "build_barracks": has_scv and depot_done and bool(v.placements(3).any()),
+        "train_marine": bool(v.own(_T.Barracks).any()) and free >= 1,
+        "gather": int(v.player[_P.idle_worker_count]) > 0,
+        "no_op": True,
+    }
+    return np.array([ok[name] for name in MACROS], dtype=bool)
+
+
+def observation_space(schema: Schema) -> spaces.Dict:
+    """One ``Box`` per schema key, in the stored dtype and shape of one frame."""
+    boxes: dict[str, spaces.Space[Any]] = {}
+    for l in schema.layers:
+        n = schema.size(l.group)
+        boxes[l.key] = spaces.Box(0, l.limit - 1, (n, n), l.dtype)
+    for v in schema.vectors:
+        boxes[v.name] = spaces.Box(0, np.iinfo(v.dtype).max, (v.size,), v.dtype)
+    return spaces.Dict(boxes)
+
+
+class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
+    """BuildMarines as a gymnasium env; see the module docstring for spaces, counting, masks."""
+
+    metadata: dict[str, Any] = {"render_modes": []}
+
+    def __init__(self, action_space: str = "macro", *, backend: str = "sim",
+                 layers: str = "paper", game_loops: int | None = None,
+                 step_mul: int = STEP_MUL, **env_kwargs: Any) -> None:
+        if action_space not in ACTION_SPACES:
+            raise Sc2DataError(f"unknown action space {action_space!r}; choose one of: "
+                               f"{', '.join(ACTION_SPACES)}")
+        try:
+            self.schema = Schema.named(layers)
+        except ValueError as e:
+            raise Sc2DataError(str(e)) from None
+        self.kind = action_space
+        self.backend = backend
+        self.step_mul = step_mul
+        self._env_kwargs = dict(env_kwargs)
+        if game_loops is not None:
+            if backend != "sim":
+                raise Sc2DataError("game_loops (a shorter episode) needs the simulator backend")
+            self._env_kwargs["game_loops"] = int(game_loops)
+        self.observation_space = observation_space(self.schema)
+        if action_space == "macro":
+            self.action_space = spaces.Discrete(len(MACROS))
+        else:
+            self.action_space = spaces.MultiDiscrete([len(PAPER_FUNCTIONS), SCREEN_SIZE,
+                                                      SCREEN_SIZE])
+        self._env: Any = None
+        self._ts: Any = None
+        self._view: ScreenView | None = None
+        self._expander = ReducedRandomAgent(0)
+        self.frames: list[Any] = []
+        """pysc2 observations of the last decision: the one before it, then one per pysc2 step."""
+
+    # -- gymnasium API ---------------------------------------------------------------------------
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
+              ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        super().reset(seed=seed)
+        env_seed, macro_seed = (int(s) for s in self.np_random.integers(2**31 - 1, size=2))
+        if self.backend == "sim" or self._env is None:
+            if self._env is not None:
+                self._env.close()
+            self._env = make_env(self.backend, seed=env_seed, step_mul=self.step_mul,
+                                 **self._env_kwargs)
+        self._expander = ReducedRandomAgent(macro_seed)
+        self._ts = self._env.reset()[0]
+        self._view = ScreenView(self._ts)
+        self.frames = [self._ts.observation]
+        return self._obs(), {"game_reward": 0.0, "env_steps": 0, "game_loop": self._loop(),
+                             "marines": self._marines()}
+
+    def step(self, action: Any) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+        if self._ts is None:
+            raise RuntimeError("call reset() before step()")
+        self.frames = [self._ts.observation]
+        reward = 0.0
+        invalid = not self._allowed(action)
+        if invalid:
+            reward += self._send(NO_OP)
+        elif self.kind == "paper":
+            reward += self._send(paper_call(*(int(a) for a in np.asarray(action).reshape(3))))
+        else:
+            reward += self._play_macro(MACROS[int(action)])
+        info = {"game_reward": reward, "env_steps": len(self.frames) - 1, "invalid": invalid,
+                "game_loop": self._loop(), "marines": self._marines()}
+        return self._obs(), reward, bool(self._ts.last()), False, info
+
+    def action_masks(self) -> np.ndarray:
+        """Which actions are allowed now (sb3-contrib's protocol; see the module docstring)."""
+        assert self._view is not None, "call reset() first"
+        if self.kind == "macro":
+            return macro_feasible(self._view)
+        available = self._view.available
+        funcs = np.array([i in available for i in _PAPER_IDS], dtype=bool)
+        return np.concatenate([funcs, np.ones(2 * SCREEN_SIZE, dtype=bool)])
+
+    def close(self) -> None:
+        if self._env is not None:
+            self._env.close()
+            self._env = None
+
+    # -- internals -------------------------------------------------------------------------------
+
+    def _allowed(self, action: Any) -> bool:
+        if self.kind == "macro":
+            return bool(self.action_masks()[int(action)])
+        assert self._view is not None
+        return _PAPER_IDS[int(np.asarray(action).reshape(3)[0])] in self._view.available
+
+    def _send(self, call: actions.FunctionCall) -> float:
+        """One pysc2 step with ``call`` (already checked against ``available_actions``)."""
+        self._ts = self._env.step([call])[0]
+        self._view = ScreenView(self._ts)
+        self.frames.append(self._ts.observation)
+        return float(self._ts.reward or 0.0)
+
+    def _play_macro(self, name: str) -> float:
+        """Send the macro's calls one pysc2 step each, as ``MacroAgent.step`` does: the view is
+        the latest observation when each call is drawn; an unavailable call ends the macro."""
+        agent = self._expander
+        agent.view = self._view
+        reward = 0.0
+        macro = agent.macro(name)
+        cost = agent.COST.get(name, 0)
+        for call in agent.save_up(cost, macro, agent.PATIENCE) if cost else macro:
+            if not self._view.can(call):  # type: ignore[union-attr]
+                break
+            reward += self._send(call)
+            agent.view = self._view
+            if self._ts.last():
+                break
+        if len(self.frames) == 1:
+            reward += self._send(NO_OP)
+        return reward
+
+    def _obs(self) -> dict[str, np.ndarray]:
+        return self.schema.extract(self._ts.observation)
+
+    def _loop(self) -> int:
+        return int(np.asarray(self._ts.observation["game_loop"]).reshape(-1)[0])
+
+    def _marines(self) -> int:
+        """The game's score so far: marines made this episode (``score_cumulative.score``)."""
+        return int(np.asarray(self._ts.observation["score_cumulative"])[0])

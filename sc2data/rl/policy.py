@@ -1,0 +1,52 @@
+"""The policy's feature extractor: a small CNN over the schema's layers plus the vectors.
+
+SB3's default ``CombinedExtractor`` would flatten every 64×64 layer into one MLP input (80k
+inputs with the paper's layers). Instead each layer is scaled to [0, 1] by its pysc2 scale,
+screen and minimap layers go through their own three-layer strided CNN (64 → 8 pixels), and the
+non-spatial vectors through ``log1p`` and a linear layer; the three are concatenated and mapped
+to ``features_dim``.
+"""
+
+from __future__ import annotations
+
+import torch
+from gymnasium import spaces
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
+from torch import nn
+
+from sc2data.schema import layer
+
+
+def _cnn(channels: int) -> nn.Sequential:
+    return nn.Sequential(
+        nn.Conv2d(channels, 16, 5, stride=2, padding=2), nn.ReLU(),
+        nn.Conv2d(16, 32, 3, stride=2, padding=1), nn.ReLU(),
+        nn.Conv2d(32, 32, 3, stride=2, padding=1), nn.ReLU(),
+        nn.AdaptiveAvgPool2d(8), nn.Flatten())
+
+
+class StateExtractor(BaseFeaturesExtractor):
+    """Features of a ``BuildMarinesGym`` observation (see the module docstring)."""
+
+    def __init__(self, observation_space: spaces.Dict, features_dim: int = 256) -> None:
+        super().__init__(observation_space, features_dim)
+        keys = list(observation_space.spaces)
+        self.groups = {g: [k for k in keys if k.startswith(g + "/")] for g in ("screen", "minimap")}
+        self.vectors = [k for k in keys if "/" not in k]
+        for g, ks in self.groups.items():
+            scale = torch.tensor([float(layer(g, k.split("/", 1)[1]).scale) for k in ks])  # type: ignore[arg-type]
+            self.register_buffer(f"scale_{g}", scale.view(1, -1, 1, 1))
+        self.cnns = nn.ModuleDict({g: _cnn(len(ks)) for g, ks in self.groups.items() if ks})
+        n_vec = sum(int(observation_space.spaces[k].shape[0]) for k in self.vectors)  # type: ignore[index]
+        self.vec = nn.Sequential(nn.Linear(n_vec, 64), nn.ReLU())
+        self.head = nn.Sequential(nn.Linear(len(self.cnns) * 32 * 64 + 64, features_dim),
+                                  nn.ReLU())
+
+    def forward(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
+        parts = []
+        for g, cnn in self.cnns.items():
+            x = torch.stack([obs[k].float() for k in self.groups[g]], dim=1)
+            parts.append(cnn(x / getattr(self, f"scale_{g}")))
+        v = torch.cat([obs[k].float().clamp(min=0) for k in self.vectors], dim=1)
+        parts.append(self.vec(torch.log1p(v)))
+        return self.head(torch.cat(parts, dim=1))  # type: ignore[no-any-return]

@@ -1,0 +1,164 @@
+"""Reward wrappers: the game's sparse reward, hand-made rule shaping, and narration shaping.
+
+Each wraps a :class:`~sc2data.rl.envs.BuildMarinesGym` (possibly under other wrappers) and reads
+the pysc2 observations of the last decision from ``env.unwrapped.frames`` — ``frames[0]`` the one
+before the decision, then one per pysc2 step — as two-frame stacks ``(frames[i-1], frames[i])``,
+i = 1…n, the same (previous, current) stacks the rules label and the MEM was trained on. So an
+event in any pysc2 step of a multi-step macro is seen, once.
+
+Every wrapper leaves ``info["game_reward"]`` (the game's own reward: +1 per marine) untouched
+and adds ``info["shaping"]`` (what it added), so agents trained on any reward are scored alike.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from sc2data.errors import Sc2DataError
+from sc2data.rl.narration import Narration, check_readable
+from sc2data.rulebase import Rule, schema_for
+from sc2data.schema import Schema, StackBatch
+
+REWARDS: tuple[str, ...] = ("sparse", "rules", "narration")
+
+
+def stacks_of(frames: Sequence[Mapping[str, Any]], schema: Schema) -> StackBatch:
+    """The ``len(frames) - 1`` consecutive two-frame stacks of ``frames``, in ``schema``."""
+    extracted = [schema.extract(f) for f in frames]
+    keys = schema.keys()
+    arrays = {k: np.stack([np.stack([extracted[i - 1][k], extracted[i][k]])
+                           for i in range(1, len(extracted))]) for k in keys}
+    return StackBatch(arrays, schema)
+
+
+class _Shaping(gym.Wrapper):  # type: ignore[type-arg]
+    """Common part: masks pass through; ``shape`` says what to add to the game's reward."""
+
+    def action_masks(self) -> np.ndarray:
+        return self.env.unwrapped.action_masks()  # type: ignore[attr-defined, no-any-return]
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        game = float(info.get("game_reward", reward))
+        extra = self.shape(self.env.unwrapped.frames)  # type: ignore[attr-defined]
+        info = {**info, "game_reward": game, "shaping": extra}
+        return obs, game + extra, terminated, truncated, info
+
+    def shape(self, frames: Sequence[Mapping[str, Any]]) -> float:
+        raise NotImplementedError
+
+
+class SparseReward(_Shaping):
+    """The game's reward, unchanged: ``r = r_game`` (+1 per marine made during the decision)."""
+
+    def shape(self, frames: Sequence[Mapping[str, Any]]) -> float:
+        return 0.0
+
+
+class RuleShaping(_Shaping):
+    """Hand-made shaping from the built-in labelling rules.
+
+    ``r = r_game + bonus · Σ_i Σ_rules rule(stack_i)``: for each two-frame stack of the decision
+    (i = 1…n, see the module docstring) and each rule, ``bonus`` when the rule fires. The rules
+    are the ``rules/`` plugins (build an SCV, collect minerals, build a supply depot, build a
+    barracks, train a marine), loaded through ``sc2data.labels.registry.load_registry``;
+    ``rule_ids`` picks some of them.
+    """
+
+    def __init__(self, env: gym.Env, *, bonus: float = 0.1,  # type: ignore[type-arg]
+                 rule_ids: Sequence[str] | None = None) -> None:
+        super().__init__(env)
+        from sc2data.labels.registry import load_registry
+
+        self.bonus = float(bonus)
+        self.rules: list[Rule] = [e.rule for e in load_registry().select(rule_ids)]
+        self.schema = schema_for(k for r in self.rules for k in r.requires if "/" in k)
+
+    def shape(self, frames: Sequence[Mapping[str, Any]]) -> float:
+        batch = stacks_of(frames, self.schema)
+        fired = sum(int(np.count_nonzero(rule(batch))) for rule in self.rules)
+        return self.bonus * fired
+
+
+class NarrationShaping(_Shaping):
+    """Narration shaping with a trained MEM (Waytowich et al., arXiv 1911.00497).
+
+    The narration is an ordered list of commands c_0…c_{m-1}; k (the current command) starts at 0
+    each episode. For each two-frame stack s_i of the decision, in order:
+
+        r += bonus   and   k ← (k + 1) mod m      if  MEM.distance(s_i, c_k) < threshold
+
+    so ``r = r_game + bonus · (number of commands matched in turn)``; after the last command
+    the narration starts again (it loops). With ``patience`` > 0, a command not matched within
+    ``patience`` decisions is skipped (k advances, no bonus); 0 waits for it forever.
+
+    ``scorer`` is a :class:`~sc2data.model.reward.MEMScorer` (``load_model(RUN)``) or anything
+    with the same ``distance(stacks, text) -> (B,) array`` method and a ``schema``. The command
+    embeddings are computed once, at construction (the scorer caches them per text).
+    ``info["narration_index"]`` is k after the decision.
+    """
+
+    def __init__(self, env: gym.Env, scorer: Any, narration: Narration, *,  # type: ignore[type-arg]
+                 bonus: float = 1.0, threshold: float = 0.5, patience: int = 0) -> None:
+        super().__init__(env)
+        if not narration.commands:
+            raise Sc2DataError("the narration holds no command")
+        if patience < 0:
+            raise Sc2DataError(f"patience must be 0 or more, got {patience}")
+        check_readable(narration, scorer)
+        self.scorer, self.narration = scorer, narration
+        self.bonus, self.threshold, self.patience = float(bonus), float(threshold), int(patience)
+        self.schema: Schema = scorer.schema
+        if hasattr(scorer, "embed_texts"):
+            scorer.embed_texts(list(narration.commands))  # encode each command once, now
+        self.index = 0
+        self._waited = 0
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        self.index, self._waited = 0, 0
+        obs, info = self.env.reset(**kwargs)
+        return obs, {**info, "narration_index": 0}
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = super().step(action)
+        return obs, reward, terminated, truncated, {**info, "narration_index": self.index}
+
+    def shape(self, frames: Sequence[Mapping[str, Any]]) -> float:
+        batch = stacks_of(frames, self.schema)
+        extra, start, matched = 0.0, 0, False
+        while start < len(batch):
+            rest = batch if start == 0 else StackBatch(
+                {k: a[start:] for k, a in batch.arrays.items()}, batch.schema)
+            d = np.asarray(self.scorer.distance(rest, self.narration.commands[self.index]))
+            hits = np.flatnonzero(d < self.threshold)
+            if not len(hits):
+                break
+            extra += self.bonus
+            matched = True
+            self.index = (self.index + 1) % len(self.narration)
+            start += int(hits[0]) + 1
+        self._waited = 0 if matched else self._waited + 1
+        if self.patience and self._waited >= self.patience:
+            self.index = (self.index + 1) % len(self.narration)
+            self._waited = 0
+        return extra
+
+
+def wrap_reward(env: gym.Env, reward: str, *, scorer: Any = None,  # type: ignore[type-arg]
+                narration: Narration | None = None, bonus: float | None = None,
+                threshold: float = 0.5, patience: int = 0) -> gym.Env:  # type: ignore[type-arg]
+    """``env`` under the reward wrapper named ``reward`` (one of :data:`REWARDS`)."""
+    if reward == "sparse":
+        return SparseReward(env)
+    if reward == "rules":
+        return RuleShaping(env, bonus=0.1 if bonus is None else bonus)
+    if reward == "narration":
+        if scorer is None or narration is None:
+            raise Sc2DataError("the narration reward needs a MEM run (--mem) and a narration")
+        return NarrationShaping(env, scorer, narration, bonus=1.0 if bonus is None else bonus,
+                                threshold=threshold, patience=patience)
+    raise Sc2DataError(f"unknown reward {reward!r}; choose one of: {', '.join(REWARDS)}")

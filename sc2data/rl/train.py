@@ -1,0 +1,383 @@
+"""Train, evaluate and plot MaskablePPO agents on BuildMarines with a chosen reward.
+
+A run folder (``--out RUN``) holds:
+
+* ``config.json`` — the settings (what a rerun must match to resume);
+* ``model.zip`` — the latest checkpoint (sb3-contrib's format), replaced atomically;
+* ``state.json`` — decisions and pysc2 steps trained so far, episodes, resume count;
+* ``curve.csv`` / ``curve.json`` — one row per finished training episode: the env, SB3's
+  timestep count (decisions over all envs) and the pysc2 steps over all envs when it ended, the
+  marines made (the game's score), the game's return and the shaped return;
+* ``eval.json`` — written by :func:`evaluate`.
+
+Resuming: rerunning the same command (the same settings; a larger ``--steps`` is allowed)
+continues from ``model.zip``; episodes running at the interruption are lost, and the resumed
+part's environments are seeded ``seed + 1000·resumes + i`` so that no episode repeats.
+Training seeds env i with ``seed + i`` (then ``+ 1000`` per resume); evaluation episodes use
+seeds ``EVAL_SEED + e``, a range training never uses while ``seed < 900,000``.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import functools
+import io
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sc2data.errors import MissingDependencyError, Sc2DataError
+from sc2data.files import write_atomic
+
+EVAL_SEED = 1_000_000
+"""First evaluation episode seed (training's seeds stay below it)."""
+
+CURVE_FIELDS: tuple[str, ...] = ("episode", "env", "timesteps", "env_steps", "marines",
+                                 "game_return", "return")
+
+
+def require_rl(purpose: str) -> None:
+    """Raise a one-line :class:`MissingDependencyError` unless the ``rl`` extra is installed."""
+    for module, package in (("gymnasium", "gymnasium"), ("stable_baselines3", "stable-baselines3"),
+                            ("sb3_contrib", "sb3-contrib"), ("torch", "torch")):
+        try:
+            __import__(module)
+        except ImportError:
+            raise MissingDependencyError(package, "rl", purpose) from None
+
+
+@dataclass(frozen=True)
+class RLConfig:
+    """Everything that defines a training run (``steps`` and ``progress`` may change on resume)."""
+
+    out: str
+    action_space: str = "macro"
+    reward: str = "sparse"
+    narration: str | None = None
+    mem: str | None = None
+    steps: int = 10_000
+    envs: int = 1
+    seed: int = 0
+    bonus: float | None = None
+    """Shaping bonus per rule firing (rules, default 0.1) or per matched command (narration, 1)."""
+    threshold: float = 0.5
+    patience: int = 0
+    episode_steps: int | None = None
+    """pysc2 steps per episode (simulator only); None: the map's 1,800."""
+    rollout: int = 256
+    """PPO rollout length per env (SB3's ``n_steps``)."""
+    batch_size: int = 64
+    checkpoint_every: int = 2048
+    layers: str = "paper"
+    backend: str = "sim"
+    progress: bool | None = None
+
+    RESUMABLE = ("steps", "progress", "out")
+
+    def identity(self) -> dict[str, Any]:
+        return {k: v for k, v in dataclasses.asdict(self).items() if k not in self.RESUMABLE}
+
+
+def check_config(cfg: RLConfig) -> tuple[Any, Any]:
+    """Validate ``cfg`` before anything is written: (narration, scorer) for the narration reward."""
+    from sc2data.rl.envs import ACTION_SPACES
+    from sc2data.rl.rewards import REWARDS
+
+    if cfg.action_space not in ACTION_SPACES:
+        raise Sc2DataError(f"unknown action space {cfg.action_space!r}; choose one of: "
+                           f"{', '.join(ACTION_SPACES)}")
+    if cfg.reward not in REWARDS:
+        raise Sc2DataError(f"unknown reward {cfg.reward!r}; choose one of: {', '.join(REWARDS)}")
+    for name in ("steps", "envs", "rollout", "batch_size", "checkpoint_every"):
+        if getattr(cfg, name) < 1:
+            raise Sc2DataError(f"--{name.replace('_', '-')} must be at least 1")
+    if cfg.episode_steps is not None and cfg.episode_steps < 1:
+        raise Sc2DataError("--episode-steps must be at least 1")
+    if not 0 <= cfg.seed < EVAL_SEED - 100_000:
+        raise Sc2DataError(f"--seed must lie in [0, {EVAL_SEED - 100_000})")
+    if cfg.reward != "narration":
+        if cfg.mem is not None or cfg.narration is not None:
+            raise Sc2DataError("--mem and --narration go with --reward narration")
+        return None, None
+    if cfg.mem is None:
+        raise Sc2DataError("--reward narration needs --mem RUN (a trained MEM: sc2data train)")
+    from sc2data.model.reward import load_model
+    from sc2data.rl.narration import check_readable, load_narration
+
+    narration = load_narration(cfg.narration)
+    scorer = load_model(cfg.mem)
+    check_readable(narration, scorer)
+    return narration, scorer
+
+
+def make_env(cfg: RLConfig, scorer: Any = None, narration: Any = None) -> Any:
+    """One training environment: ``BuildMarinesGym`` under the run's reward wrapper."""
+    from sc2data.rl.envs import BuildMarinesGym
+    from sc2data.rl.rewards import wrap_reward
+    from sc2data.vocab import STEP_MUL
+
+    loops = cfg.episode_steps * STEP_MUL if cfg.episode_steps else None
+    env = BuildMarinesGym(cfg.action_space, backend=cfg.backend, layers=cfg.layers,
+                          game_loops=loops)
+    if cfg.reward == "narration" and scorer is None:
+        import torch
+
+        from sc2data.model.reward import load_model
+        from sc2data.rl.narration import load_narration
+
+        torch.set_num_threads(1)
+        scorer, narration = load_model(cfg.mem), load_narration(cfg.narration)  # type: ignore[arg-type]
+    return wrap_reward(env, cfg.reward, scorer=scorer, narration=narration, bonus=cfg.bonus,
+                       threshold=cfg.threshold, patience=cfg.patience)
+
+
+def _env_factory(cfg: RLConfig) -> Any:
+    return make_env(cfg)
+
+
+def make_vec_env(cfg: RLConfig, scorer: Any = None, narration: Any = None) -> Any:
+    """``cfg.envs`` environments: in this process for one, one subprocess each for more."""
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    if cfg.envs == 1:
+        return DummyVecEnv([lambda: make_env(cfg, scorer, narration)])
+    return SubprocVecEnv([functools.partial(_env_factory, cfg) for _ in range(cfg.envs)])
+
+
+def _read_json(path: Path) -> Any:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError) as e:
+        raise Sc2DataError(f"cannot read {path}: {e}") from None
+
+
+def _write_json(path: Path, data: Any) -> None:
+    write_atomic(path, (json.dumps(data, indent=1, sort_keys=True) + "\n").encode())
+
+
+def read_curve(run: Path) -> list[dict[str, float]]:
+    """The learning curve rows of a run (an empty list before the first episode ends)."""
+    path = run / "curve.csv"
+    if not path.is_file():
+        return []
+    with path.open(newline="") as f:
+        return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(f)]
+
+
+def _write_curve(run: Path, rows: Sequence[dict[str, float]], cfg: RLConfig) -> None:
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=CURVE_FIELDS, lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: (int(r[k]) if float(r[k]).is_integer() else r[k]) for k in CURVE_FIELDS})
+    write_atomic(run / "curve.csv", buf.getvalue().encode())
+    _write_json(run / "curve.json", {"config": cfg.identity(), "episodes": list(rows)})
+
+
+def train(cfg: RLConfig) -> Path:
+    """Train (or resume) a MaskablePPO agent; returns the run folder."""
+    require_rl("sc2data rl train")
+    narration, scorer = check_config(cfg)
+    run = Path(cfg.out)
+    state: dict[str, Any] = {"timesteps": 0, "env_steps": 0, "episodes": 0, "resumes": 0}
+    if (run / "config.json").is_file():
+        old = _read_json(run / "config.json")
+        if old != cfg.identity():
+            diff = sorted(k for k in set(old) | set(cfg.identity())
+                          if old.get(k) != cfg.identity().get(k))
+            raise Sc2DataError(f"{run} holds a run with other settings ({', '.join(diff)}); "
+                               f"rerun with the same options to resume, or pick another --out")
+        if (run / "state.json").is_file() and (run / "model.zip").is_file():
+            state = _read_json(run / "state.json")
+            state["resumes"] += 1
+    elif run.exists() and any(run.iterdir()):
+        raise Sc2DataError(f"{run} exists and is not an sc2data rl run; pick another --out")
+    if state["timesteps"] >= cfg.steps:
+        print(f"{run} is already trained for {state['timesteps']} steps (--steps {cfg.steps})")
+        return run
+
+    import torch
+    from sb3_contrib import MaskablePPO
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    from sc2data.progress import bar
+    from sc2data.rl.policy import StateExtractor
+
+    torch.set_num_threads(1)
+    run.mkdir(parents=True, exist_ok=True)
+    _write_json(run / "config.json", cfg.identity())
+    rows = [r for r in read_curve(run) if r["timesteps"] <= state["timesteps"]]
+    seed = cfg.seed + 1000 * state["resumes"]
+    vec = make_vec_env(cfg, scorer, narration)
+    try:
+        if state["timesteps"]:
+            model = MaskablePPO.load(run / "model.zip", env=vec, device="cpu")
+            model.set_random_seed(seed)
+        else:
+            model = MaskablePPO(
+                "MultiInputPolicy", vec, n_steps=cfg.rollout, batch_size=cfg.batch_size,
+                n_epochs=4, learning_rate=3e-4, gamma=0.99, ent_coef=0.01, seed=seed,
+                device="cpu", verbose=0,
+                policy_kwargs={"features_extractor_class": StateExtractor})
+
+        class Curve(BaseCallback):
+            """Episode rows, the progress bar and periodic checkpoints."""
+
+            def __init__(self, progress: Any) -> None:
+                super().__init__()
+                self.bar = progress
+                self.game = np.zeros(cfg.envs)
+                self.ret = np.zeros(cfg.envs)
+                self.next_save = state["timesteps"] + cfg.checkpoint_every
+                self.last = state["timesteps"]
+
+            def _on_step(self) -> bool:
+                infos, dones = self.locals["infos"], self.locals["dones"]
+                rewards = self.locals["rewards"]
+                for i, info in enumerate(infos):
+                    state["env_steps"] += int(info.get("env_steps", 1))
+                    self.game[i] += float(info.get("game_reward", rewards[i]))
+                    self.ret[i] += float(rewards[i])
+                    if dones[i]:
+                        state["episodes"] += 1
+                        rows.append({"episode": state["episodes"], "env": i,
+                                     "timesteps": self.num_timesteps,
+                                     "env_steps": state["env_steps"],
+                                     "marines": int(info.get("marines", self.game[i])),
+                                     "game_return": round(self.game[i], 6),
+                                     "return": round(self.ret[i], 6)})
+                        self.game[i] = self.ret[i] = 0.0
+                self.bar.update(self.num_timesteps - self.last)
+                self.last = self.num_timesteps
+                if self.num_timesteps >= self.next_save:
+                    self.save()
+                    self.next_save = self.num_timesteps + cfg.checkpoint_every
+                return True
+
+            def save(self) -> None:
+                state["timesteps"] = self.num_timesteps
+                _write_curve(run, rows, cfg)
+                partial = run / "model.partial.zip"
+                model.save(partial)
+                partial.replace(run / "model.zip")
+                _write_json(run / "state.json", state)
+
+        with bar(cfg.steps, desc="rl train", unit="step", show=cfg.progress) as progress:
+            progress.update(state["timesteps"])
+            callback = Curve(progress)
+            model.learn(total_timesteps=cfg.steps - state["timesteps"], callback=callback,
+                        reset_num_timesteps=False)
+            callback.save()
+    finally:
+        vec.close()
+    return run
+
+
+def load_config(run: Path) -> RLConfig:
+    """The settings of a trained run (its ``config.json``)."""
+    if not (run / "config.json").is_file() or not (run / "model.zip").is_file():
+        raise Sc2DataError(f"{run} is not a trained sc2data rl run (no config.json and "
+                           f"model.zip); train one with sc2data rl train --out {run}")
+    data = _read_json(run / "config.json")
+    known = {f.name for f in dataclasses.fields(RLConfig)}
+    return RLConfig(out=str(run), **{k: v for k, v in data.items() if k in known})
+
+
+def evaluate(run: Path, episodes: int = 10, deterministic: bool = True,
+             progress: bool | None = None) -> dict[str, Any]:
+    """Play ``episodes`` seeded episodes (seeds ``EVAL_SEED + e``) with the trained policy and
+    the action masks; score each by the game's own reward (marines made). Writes ``eval.json``."""
+    require_rl("sc2data rl evaluate")
+    if episodes < 1:
+        raise Sc2DataError("--episodes must be at least 1")
+    cfg = load_config(run)
+    import torch
+    from sb3_contrib import MaskablePPO
+
+    from sc2data.progress import bar
+    from sc2data.rl.envs import BuildMarinesGym
+    from sc2data.vocab import STEP_MUL
+
+    torch.set_num_threads(1)
+    model = MaskablePPO.load(run / "model.zip", device="cpu")
+    loops = cfg.episode_steps * STEP_MUL if cfg.episode_steps else None
+    env = BuildMarinesGym(cfg.action_space, backend=cfg.backend, layers=cfg.layers,
+                          game_loops=loops)
+    marines: list[int] = []
+    with bar(episodes, desc="rl evaluate", unit="episode", show=progress) as b:
+        for e in range(episodes):
+            obs, _ = env.reset(seed=EVAL_SEED + e)
+            done = False
+            while not done:
+                action, _ = model.predict(obs, deterministic=deterministic,
+                                          action_masks=env.action_masks())
+                obs, _, terminated, truncated, info = env.step(action)
+                done = terminated or truncated
+            marines.append(int(info["marines"]))
+            b.update(1)
+    env.close()
+    state = _read_json(run / "state.json") if (run / "state.json").is_file() else {}
+    result = {"episodes": episodes, "seeds": [EVAL_SEED + e for e in range(episodes)],
+              "marines": marines, "mean": float(np.mean(marines)),
+              "std": float(np.std(marines)), "deterministic": deterministic,
+              "trained_timesteps": state.get("timesteps"), "trained_env_steps":
+              state.get("env_steps"), "config": cfg.identity()}
+    _write_json(run / "eval.json", result)
+    return result
+
+
+def plot(runs: Sequence[Path], out: Path, window: int = 10) -> Path:
+    """Marines per training episode against pysc2 steps, one line (rolling mean) per run."""
+    curves = []
+    for run in runs:
+        if not (run / "config.json").is_file():
+            raise Sc2DataError(f"{run} is not an sc2data rl run (no config.json)")
+        rows = read_curve(run)
+        if not rows:
+            raise Sc2DataError(f"{run} has no finished training episode to plot yet")
+        curves.append((run, load_config_loose(run), rows))
+    if window < 1:
+        raise Sc2DataError("--window must be at least 1")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4.2))
+    for run, cfg, rows in curves:
+        x = np.array([r["env_steps"] for r in rows])
+        y = np.array([r["marines"] for r in rows])
+        w = min(window, len(y))
+        smooth = np.convolve(y, np.ones(w) / w, mode="valid")
+        line, = ax.plot(x[w - 1:], smooth, label=f"{run.name} ({cfg.get('action_space')}, "
+                                                 f"{cfg.get('reward')})")
+        ax.scatter(x, y, s=6, alpha=0.3, color=line.get_color())
+    ax.set_xlabel("pysc2 steps (all envs)")
+    ax.set_ylabel(f"marines per episode (mean of {window})")
+    ax.set_title("BuildMarines, MaskablePPO: game score while training")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=120)
+    plt.close(fig)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_atomic(out, buf.getvalue())
+    return out
+
+
+def load_config_loose(run: Path) -> dict[str, Any]:
+    data = _read_json(run / "config.json")
+    return data if isinstance(data, dict) else {}
+
+
+def summary(result: dict[str, Any]) -> str:
+    """One line: marines per episode, mean ± std over the evaluation episodes."""
+    return (f"marines per episode: {result['mean']:.2f} ± {result['std']:.2f} over "
+            f"{result['episodes']} episodes (seeds {EVAL_SEED}…{EVAL_SEED + result['episodes'] - 1})")
+

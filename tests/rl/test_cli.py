@@ -1,0 +1,117 @@
+"""``sc2data rl`` as a user runs it: train, resume, evaluate, plot, and one-line errors."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.cli import assert_one_line_error, run_cli
+from tests.mem_helpers import tiny_pairset, train_tiny
+
+TINY = ["--steps", "96", "--rollout", "32", "--batch-size", "32", "--episode-steps", "40",
+        "--checkpoint-every", "64", "--no-progress"]
+
+
+@pytest.fixture(scope="module")
+def mem_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("mem")
+    return train_tiny(tiny_pairset(root / "pairs"), root / "run", epochs=1)
+
+
+def test_train_resume_evaluate_plot(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    run = tmp_path / "run"
+    code, out, err = run_cli(["rl", "train", "--out", run, "--seed", "1", *TINY], capsys)
+    assert code == 0, err
+    state = json.loads((run / "state.json").read_text())
+    assert state["timesteps"] == 96 and state["resumes"] == 0
+    header, *rows = (run / "curve.csv").read_text().splitlines()
+    assert header == "episode,env,timesteps,env_steps,marines,game_return,return"
+    assert rows and all(int(r.split(",")[3]) % 40 == 0 for r in rows)  # episodes of 40 steps
+    # Rerunning the same command does nothing; a larger --steps continues from the checkpoint.
+    code, out, err = run_cli(["rl", "train", "--out", run, "--seed", "1", *TINY], capsys)
+    assert code == 0 and "already trained" in out
+    more = [a if a != "96" else "160" for a in TINY]
+    code, out, err = run_cli(["rl", "train", "--out", run, "--seed", "1", *more], capsys)
+    assert code == 0, err
+    state = json.loads((run / "state.json").read_text())
+    assert state["timesteps"] == 160 and state["resumes"] == 1
+    assert len((run / "curve.csv").read_text().splitlines()) > len(rows) + 1
+    # Other settings in the same folder: refused, nothing changed.
+    code, _, err = run_cli(["rl", "train", "--out", run, "--seed", "2", *more], capsys)
+    assert_one_line_error(code, err, "other settings", "seed")
+
+    code, out, err = run_cli(["rl", "evaluate", run, "--episodes", "2", "--no-progress"], capsys)
+    assert code == 0, err and "marines per episode" in out
+    result = json.loads((run / "eval.json").read_text())
+    assert result["episodes"] == 2 and result["seeds"] == [1_000_000, 1_000_001]
+    assert len(result["marines"]) == 2
+
+    png = tmp_path / "curves.png"
+    code, out, err = run_cli(["rl", "plot", run, run, "--out", png], capsys)
+    assert code == 0, err
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_narration_training_with_a_tiny_mem(mem_run: Path, tmp_path: Path,
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    run = tmp_path / "nar"
+    code, _, err = run_cli(["rl", "train", "--out", run, "--reward", "narration", "--mem",
+                            mem_run, "--action-space", "paper", "--threshold", "2", *TINY],
+                           capsys)
+    assert code == 0, err
+    rows = (run / "curve.csv").read_text().splitlines()[1:]
+    assert rows
+    # game_return is the game's score alone; return adds the narration bonus.
+    for r in rows:
+        _, _, _, _, marines, game, shaped = r.split(",")
+        assert float(game) == float(marines) and float(shaped) >= float(game)
+
+
+@pytest.mark.parametrize("args, needles", [
+    (["--action-space", "full"], ("unknown action space", "macro")),
+    (["--reward", "dense"], ("unknown reward", "narration")),
+    (["--reward", "narration"], ("--mem",)),
+    (["--reward", "narration", "--mem", "/nonexistent/run"], ("does not exist",)),
+    (["--steps", "0"], ("--steps",)),
+    (["--mem", "x"], ("--reward narration",)),
+])
+def test_bad_input_is_one_line_and_writes_nothing(
+        args: list[str], needles: tuple[str, ...], tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    run = tmp_path / "run"
+    code, _, err = run_cli(["rl", "train", "--out", run, *TINY, *args], capsys)
+    assert_one_line_error(code, err, *needles)
+    assert not run.exists()
+
+
+def test_bad_narrations_are_one_line(mem_run: Path, tmp_path: Path,
+                                     capsys: pytest.CaptureFixture[str]) -> None:
+    empty, odd = tmp_path / "empty.txt", tmp_path / "odd.txt"
+    empty.write_text("# nothing here\n")
+    odd.write_text("build an SCV\nbuild a zorglubium\n")
+    for narration, needles in ((empty, ("no command",)), (odd, ("zorglubium", "vocabulary"))):
+        run = tmp_path / "run"
+        code, _, err = run_cli(["rl", "train", "--out", run, "--reward", "narration", "--mem",
+                                mem_run, "--narration", narration, *TINY], capsys)
+        assert_one_line_error(code, err, *needles)
+        assert not run.exists()
+
+
+def test_evaluate_and_plot_refuse_what_is_not_a_run(tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    code, _, err = run_cli(["rl", "evaluate", tmp_path], capsys)
+    assert_one_line_error(code, err, "not a trained sc2data rl run")
+    code, _, err = run_cli(["rl", "plot", tmp_path, "--out", tmp_path / "x.png"], capsys)
+    assert_one_line_error(code, err, "not an sc2data rl run")
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_missing_extra_names_the_install(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "sb3_contrib", None)  # import sb3_contrib → ImportError
+    code, _, err = run_cli(["rl", "train", "--out", tmp_path / "run", *TINY], capsys)
+    assert_one_line_error(code, err, "sb3-contrib", "pip install 'sc2data[rl]'")
+    assert not (tmp_path / "run").exists()

@@ -1,0 +1,139 @@
+"""The gymnasium environments: spaces, env checker, masks, seeding, registration, vector envs."""
+
+from __future__ import annotations
+
+import hashlib
+
+import gymnasium
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import sc2data.rl  # noqa: F401  (registers the ids)
+from sc2data._pysc2 import actions
+from sc2data.errors import Sc2DataError
+from sc2data.rl.envs import MACROS, PAPER_FUNCTIONS, BuildMarinesGym, paper_call
+from sc2data.schema import Schema
+
+LOOPS = 8 * 120
+"""120 pysc2 steps per episode: enough for depots and a barracks, fast to play."""
+
+
+@pytest.mark.parametrize("space", ["macro", "paper"])
+def test_env_checker_passes(space: str) -> None:
+    env = BuildMarinesGym(space, game_loops=LOOPS)
+    check_env(env, skip_render_check=True)
+    assert set(env.observation_space.spaces) == set(Schema.named("paper").keys())
+
+
+def test_gymnasium_make_both_ids() -> None:
+    for space, n in (("macro", len(MACROS)), ("paper", len(PAPER_FUNCTIONS))):
+        env = gymnasium.make(f"sc2data/BuildMarines-{space}-v0", game_loops=LOOPS)
+        obs, _ = env.reset(seed=0)
+        assert env.observation_space.contains(obs)
+        masks = env.unwrapped.action_masks()
+        assert masks.shape == ((n,) if space == "macro" else (n + 128,))
+        env.close()
+
+
+def _random_masked(env: BuildMarinesGym, rng: np.random.Generator) -> object:
+    m = env.action_masks()
+    if env.kind == "macro":
+        return int(rng.choice(np.flatnonzero(m)))
+    f = int(rng.choice(np.flatnonzero(m[:len(PAPER_FUNCTIONS)])))
+    return np.array([f, rng.integers(64), rng.integers(64)])
+
+
+@pytest.mark.parametrize("space", ["macro", "paper"])
+def test_masked_random_actions_never_send_an_invalid_call(space: str) -> None:
+    """The simulator raises on any unavailable call, as pysc2 does: 300 masked random steps
+    (with barracks built and marines queued on the macro space) must never hit one."""
+    env = BuildMarinesGym(space, game_loops=8 * 2000)
+    env.reset(seed=5)
+    rng = np.random.default_rng(0)
+    used: set[int] = set()
+    for _ in range(300):
+        action = _random_masked(env, rng)
+        used.add(int(np.asarray(action).reshape(-1)[0]))
+        _, _, terminated, _, info = env.step(action)
+        assert not info["invalid"]
+        assert 1 <= info["env_steps"] <= 62
+        assert not terminated
+    assert len(used) >= 5, used
+
+
+def test_unmasked_invalid_action_plays_no_op() -> None:
+    env = BuildMarinesGym("paper", game_loops=LOOPS)
+    env.reset(seed=0)
+    train_marine = PAPER_FUNCTIONS.index("Train_Marine_quick")
+    assert not env.action_masks()[train_marine]
+    _, _, _, _, info = env.step(np.array([train_marine, 0, 0]))
+    assert info["invalid"] and info["env_steps"] == 1
+
+
+def test_paper_calls_fill_every_argument() -> None:
+    for i, name in enumerate(PAPER_FUNCTIONS):
+        call = paper_call(i, 63, 0)
+        assert actions.FUNCTIONS[call.function].name == name
+        for arg in call.arguments:
+            assert all(0 <= a < 64 for a in arg)
+
+
+def _trajectory(space: str, seed: int) -> str:
+    env = BuildMarinesGym(space, game_loops=LOOPS)
+    obs, _ = env.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    h = hashlib.sha256()
+    for _ in range(60):
+        obs, r, term, _, info = env.step(_random_masked(env, rng))
+        for k in sorted(obs):
+            h.update(obs[k].tobytes())
+        h.update(repr((r, info["env_steps"])).encode())
+        if term:
+            break
+    return h.hexdigest()
+
+
+@pytest.mark.parametrize("space", ["macro", "paper"])
+def test_same_seed_same_trajectory(space: str) -> None:
+    assert _trajectory(space, 3) == _trajectory(space, 3)
+    assert _trajectory(space, 3) != _trajectory(space, 4)
+
+
+def test_episode_ends_when_the_timer_does() -> None:
+    env = BuildMarinesGym("macro", game_loops=8 * 30)
+    env.reset(seed=0)
+    steps, terminated = 0, False
+    while not terminated:
+        _, _, terminated, truncated, info = env.step(MACROS.index("no_op"))
+        steps += info["env_steps"]
+        assert not truncated
+    assert steps == 30 and info["game_loop"] == 240
+
+
+def test_bad_settings_are_errors() -> None:
+    with pytest.raises(Sc2DataError, match="unknown action space"):
+        BuildMarinesGym("full")
+    with pytest.raises(Sc2DataError, match="unknown layer set"):
+        BuildMarinesGym("macro", layers="tiny")
+
+
+def test_subproc_vec_env_with_masks() -> None:
+    from stable_baselines3.common.vec_env import SubprocVecEnv
+
+    from sc2data.rl.train import RLConfig, _env_factory
+
+    cfg = RLConfig(out="unused", episode_steps=20)
+    import functools
+
+    vec = SubprocVecEnv([functools.partial(_env_factory, cfg) for _ in range(2)])
+    try:
+        vec.seed(0)
+        obs = vec.reset()
+        assert obs["screen/unit_type"].shape == (2, 64, 64)
+        masks = np.stack(vec.env_method("action_masks"))
+        assert masks.shape == (2, len(MACROS)) and masks[:, -1].all()
+        _, rewards, _, infos = vec.step(np.array([5, 5]))
+        assert all("game_reward" in i for i in infos) and rewards.shape == (2,)
+    finally:
+        vec.close()

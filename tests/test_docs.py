@@ -41,6 +41,9 @@ SUBSTITUTIONS: list[tuple[str, str]] = [
      "--no-progress"),
     ("sc2data label DATA", "sc2data label data/rr"),
     ("for _ in range(100):", "for _ in range(20):"),
+    ("--steps 20000", "--steps 64 --rollout 32 --batch-size 32 --episode-steps 40 "
+                      "--checkpoint-every 64 --no-progress"),
+    ("sc2data rl evaluate runs/rl-narr --episodes 10", "sc2data rl evaluate runs/rl-narr --episodes 1"),
 ]
 """(text in a block, what runs instead): the README's sizes made small. The build block writes
 what ``make demo`` would (``demo-out/``), which later blocks read."""

@@ -330,13 +330,15 @@ def evaluate_cmd(
     text: list[str] = typer.Option([], "--text", help="A phrasing to measure, as "
                                    "\"PHRASE=command_id\" (repeatable)."),
     allow_unfinished: bool = typer.Option(False, help="Evaluate a run that did not finish."),
+    other_data: bool = typer.Option(False, help="Evaluate on a pair set other than the run's own "
+                                                "(report: RUN/eval-<fingerprint>.json)."),
 ) -> None:
     """Accuracy (beside the paper's), ROC-AUC, retrieval, phrasings; writes RUN/eval.json."""
     from sc2data.model.evaluate import evaluate, format_report
 
-    report = evaluate(run, data, device, text, allow_unfinished)
+    report = evaluate(run, data, device, text, allow_unfinished, other_data)
     typer.echo(format_report(report))
-    typer.echo(f"wrote {Path(run) / 'eval.json'}")
+    typer.echo(f"wrote {report['written_to']}")
 
 
 @app.command("tsne")

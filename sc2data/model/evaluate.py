@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from sc2data.errors import Sc2DataError
+from sc2data.files import write_atomic
 from sc2data.model.reward import MEMScorer, load_model, pairwise
 from sc2data.pairs.loader import PairSet
 from sc2data.vocab import SPLITS
@@ -102,14 +103,22 @@ def parse_text_option(value: str, ids: Sequence[str]) -> tuple[str, str]:
 
 def evaluate(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None,
              device: str = "auto", texts: Sequence[str] = (),
-             allow_unfinished: bool = False) -> dict[str, Any]:
+             allow_unfinished: bool = False, other_data: bool = False) -> dict[str, Any]:
     """Compute every metric for ``run`` on its pair set (or ``data``); write RUN/eval.json.
 
-    ``texts`` are extra phrasings to measure, each ``"PHRASE=command_id"``.
+    ``texts`` are extra phrasings to measure, each ``"PHRASE=command_id"``. A pair set other than
+    the one the run was trained on (another fingerprint: re-split or re-drawn, so its test split may
+    hold training states) is refused unless ``other_data``; its report then goes to
+    ``RUN/eval-<fingerprint>.json`` and the run's own ``eval.json`` is kept.
     """
     run = Path(run)
     scorer = load_model(run, device, allow_unfinished=allow_unfinished)
     pairset = _pairset(scorer, data)
+    own = pairset.fingerprint == scorer.meta.get("data_fingerprint")
+    if not own and not other_data:
+        raise Sc2DataError(f"{pairset.path} is not the pair set {run} was trained on (another "
+                           f"fingerprint: its test split may hold training states); pass "
+                           f"--other-data to evaluate on it anyway")
     command_ids = [str(c["id"]) for c in pairset.commands]
     extra = [parse_text_option(t, command_ids) for t in texts]
     scorer.embed_texts([p for p, _ in extra])  # a phrase the encoder cannot read fails now
@@ -141,8 +150,14 @@ def evaluate(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = 
         if split == "test":
             r["phrasings"] = _phrasings(scorer, states, pairs, pairset, canon_e, ids, extra, thr)
         report["splits"][split] = r
-    (run / "eval.json").write_text(json.dumps(report, indent=2))
+    report["written_to"] = str(report_path(run, pairset.fingerprint, own))
+    write_atomic(Path(report["written_to"]), json.dumps(report, indent=2).encode())
     return report
+
+
+def report_path(run: Path, fingerprint: str, own: bool) -> Path:
+    """``RUN/eval.json`` for the run's own pair set, ``RUN/eval-<fingerprint[:12]>.json`` else."""
+    return run / ("eval.json" if own else f"eval-{fingerprint[:12]}.json")
 
 
 def _pairset(scorer: MEMScorer, data: str | os.PathLike[str] | None) -> PairSet:

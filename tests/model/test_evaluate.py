@@ -150,3 +150,18 @@ def test_cli_errors_for_missing_run_foreign_schema_and_bad_data(
     assert_one_line_error(code, err, "schema version 99")
     code, _, err = run_cli(["evaluate", str(run), "--data", str(tmp_path)], capsys)
     assert_one_line_error(code, err, "pairset.json")
+
+
+def test_evaluate_refuses_another_pair_set_unless_asked(run: Path, tmp_path: Path,
+                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """A pair set re-drawn from the same episodes mixes splits: refused, never over eval.json."""
+    other = tiny_pairset(tmp_path / "other", seed=7)
+    before = (run / "eval.json").read_bytes() if (run / "eval.json").exists() else None
+    code, _, err = run_cli(["evaluate", str(run), "--data", str(other)], capsys)
+    assert_one_line_error(code, err, "is not the pair set", "--other-data")
+    code, out, err = run_cli(["evaluate", str(run), "--data", str(other), "--other-data"], capsys)
+    assert code == 0, err
+    written = [p for p in run.glob("eval-*.json")]
+    assert len(written) == 1 and f"wrote {written[0]}" in out
+    after = (run / "eval.json").read_bytes() if (run / "eval.json").exists() else None
+    assert after == before

@@ -14,6 +14,7 @@ apart by their files, described (``sc2data info``) and checked (``sc2data verify
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 from sc2data.errors import Sc2DataError
@@ -135,9 +136,9 @@ def _run_info(folder: Path) -> list[str]:
     return lines
 
 
-def _faults_of(check: object) -> list[str]:
+def _faults_of(check: Callable[[], object]) -> list[str]:
     try:
-        check()  # type: ignore[operator]
+        check()
     except Sc2DataError as e:
         return [str(e)]
     return []

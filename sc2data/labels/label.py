@@ -40,9 +40,9 @@ from sc2data.labels.source import Source, Unit, dataset_source
 from sc2data.labels.store import (
     FORMAT_VERSION,
     LABELS_FILE,
-    META_KEY,
     STACKS_FILE,
     check_sums,
+    file_meta,
     read_meta,
     write_labels,
 )
@@ -215,8 +215,8 @@ def _existing(out: Path, fp: str) -> LabelSummary | None:
     """The summary of labels already made by the same rules from the same data, if any."""
     try:
         meta = read_meta(out)
-        other = json.loads((pq.read_schema(out / STACKS_FILE).metadata or {}).get(META_KEY, b"{}"))
-    except (Sc2DataError, OSError, ValueError):
+        other = file_meta(out / STACKS_FILE)
+    except Sc2DataError:
         return None
     if meta.get("fingerprint") != fp or other.get("created") != meta.get("created") or \
             other.get("fingerprint") != fp:

@@ -81,7 +81,7 @@ def check_labels(folder: Path | str) -> None:
     check_sums(folder / SUMS_FILE, f"rerun sc2data label {folder}")
 
 
-def _schema_meta(path: Path) -> dict[str, Any]:
+def file_meta(path: Path) -> dict[str, Any]:
     """The provenance record in one label file's Parquet metadata."""
     try:
         raw = (pq.read_schema(path).metadata or {}).get(META_KEY)
@@ -101,7 +101,7 @@ def _schema_meta(path: Path) -> dict[str, Any]:
 def read_meta(folder: Path | str) -> dict[str, Any]:
     """The provenance record of the labels in ``folder``, after checking both files are intact."""
     check_labels(folder)
-    return _schema_meta(Path(folder) / LABELS_FILE)
+    return file_meta(Path(folder) / LABELS_FILE)
 
 
 @dataclass(frozen=True)
@@ -123,7 +123,7 @@ def read_labels(folder: Path | str) -> Labels:
     stacks_path = Path(folder) / STACKS_FILE
     if not stacks_path.is_file():
         raise Sc2DataError(f"{stacks_path} is missing; rerun sc2data label {folder}")
-    other = _schema_meta(stacks_path)
+    other = file_meta(stacks_path)
     if other.get("fingerprint") != meta["fingerprint"] or other.get("created") != meta["created"]:
         raise Sc2DataError(f"{LABELS_FILE} and {STACKS_FILE} in {folder} come from different "
                            f"runs; rerun sc2data label {folder}")

@@ -20,7 +20,7 @@ import numpy as np
 
 from sc2data.errors import Sc2DataError
 from sc2data.rl.narration import Narration, check_readable
-from sc2data.rulebase import Rule, schema_for
+from sc2data.rulebase import Rule, schema_for, stack
 from sc2data.schema import Schema, StackBatch
 
 REWARDS: tuple[str, ...] = ("sparse", "rules", "narration")
@@ -29,10 +29,7 @@ REWARDS: tuple[str, ...] = ("sparse", "rules", "narration")
 def stacks_of(frames: Sequence[Mapping[str, Any]], schema: Schema) -> StackBatch:
     """The ``len(frames) - 1`` consecutive two-frame stacks of ``frames``, in ``schema``."""
     extracted = [schema.extract(f) for f in frames]
-    keys = schema.keys()
-    arrays = {k: np.stack([np.stack([extracted[i - 1][k], extracted[i][k]])
-                           for i in range(1, len(extracted))]) for k in keys}
-    return StackBatch(arrays, schema)
+    return stack(list(zip(extracted, extracted[1:])), schema)
 
 
 class _Shaping(gym.Wrapper):  # type: ignore[type-arg]
@@ -49,6 +46,8 @@ class _Shaping(gym.Wrapper):  # type: ignore[type-arg]
         return obs, game + extra, terminated, truncated, info
 
     def shape(self, frames: Sequence[Mapping[str, Any]]) -> float:
+        """The bonus for the decision whose pysc2 observations are ``frames`` (the decision's
+        first frame is the previous decision's last); each reward mode defines it."""
         raise NotImplementedError
 
 

@@ -139,15 +139,20 @@ def test_rerun_is_up_to_date_and_new_rules_relabel(tmp_path: Path) -> None:
     assert read_meta(tmp_path)["counts"].keys() == {"build_scv", "collect_minerals"}
 
 
-def test_resume_after_interruption(tmp_path: Path) -> None:
+def _interrupted(tmp_path: Path) -> tuple[Path, Path]:
+    """A reference labelling, and a run of the same rules Ctrl-C'd in its second unit."""
     reference = tmp_path / "ref"
     label(source(), RULES, reference, progress=False)
-
     out = tmp_path / "out"
     broken = Source([make_unit(0), make_unit(1, fail_at=7), make_unit(2)], Schema.paper(),
                     {"path": "hand-built", "fingerprint": "abc"})
     with pytest.raises(KeyboardInterrupt):
         label(broken, RULES, out, batch_size=7, progress=False)
+    return reference, out
+
+
+def test_resume_after_interruption(tmp_path: Path) -> None:
+    reference, out = _interrupted(tmp_path)
     assert not (out / LABELS_FILE).exists() and not (out / STACKS_FILE).exists()
     assert len(list((out / PARTS_DIR).glob("*.parquet"))) == 1
     assert not [p for p in out.rglob("*") if ".tmp" in p.name]
@@ -450,13 +455,7 @@ def test_labels_without_their_checksums_are_refused(tmp_path: Path) -> None:
 
 
 def test_a_damaged_part_is_labelled_again_on_resume(tmp_path: Path) -> None:
-    reference = tmp_path / "ref"
-    label(source(), RULES, reference, progress=False)
-    out = tmp_path / "out"
-    broken = Source([make_unit(0), make_unit(1, fail_at=7), make_unit(2)], Schema.paper(),
-                    {"path": "hand-built", "fingerprint": "abc"})
-    with pytest.raises(KeyboardInterrupt):
-        label(broken, RULES, out, batch_size=7, progress=False)
+    reference, out = _interrupted(tmp_path)
     (part,) = (out / PARTS_DIR).glob("*.parquet")
     _flip(part, part.stat().st_size // 2)
     calls: list = []

@@ -69,7 +69,8 @@ def evaluate_cmd(
     progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",
                                             help="Progress bar [default: on a terminal]."),
 ) -> None:
-    """Marines per episode (the game's score), mean ± std; writes RUN/eval.json."""
+    """Marines per episode (the game's score), mean ± std; writes RUN/eval.json
+    (RUN/eval-stochastic.json with --stochastic)."""
     from sc2data.rl.train import evaluate, require_rl, summary
 
     require_rl("sc2data rl evaluate")

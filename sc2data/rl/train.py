@@ -8,7 +8,8 @@ A run folder (``--out RUN``) holds:
 * ``curve.csv`` / ``curve.json`` — one row per finished training episode: the env, SB3's
   timestep count (decisions over all envs) and the pysc2 steps over all envs when it ended, the
   marines made (the game's score), the game's return and the shaped return;
-* ``eval.json`` — written by :func:`evaluate`.
+* ``eval.json`` / ``eval-stochastic.json`` — written by :func:`evaluate` (the most likely action
+  / actions sampled from the policy).
 
 Resuming: rerunning the same command (the same settings; a larger ``--steps`` is allowed)
 continues from ``model.zip``; episodes running at the interruption are lost, and the resumed
@@ -291,7 +292,8 @@ def load_config(run: Path) -> RLConfig:
 def evaluate(run: Path, episodes: int = 10, deterministic: bool = True,
              progress: bool | None = None) -> dict[str, Any]:
     """Play ``episodes`` seeded episodes (seeds ``EVAL_SEED + e``) with the trained policy and
-    the action masks; score each by the game's own reward (marines made). Writes ``eval.json``."""
+    the action masks; score each by the game's own reward (marines made). Writes ``eval.json``
+    (``eval-stochastic.json`` when actions are sampled, so the two never overwrite each other)."""
     require_rl("sc2data rl evaluate")
     if episodes < 1:
         raise Sc2DataError("--episodes must be at least 1")
@@ -327,7 +329,7 @@ def evaluate(run: Path, episodes: int = 10, deterministic: bool = True,
               "std": float(np.std(marines)), "deterministic": deterministic,
               "trained_timesteps": state.get("timesteps"), "trained_env_steps":
               state.get("env_steps"), "config": cfg.identity()}
-    _write_json(run / "eval.json", result)
+    _write_json(run / ("eval.json" if deterministic else "eval-stochastic.json"), result)
     return result
 
 

@@ -44,10 +44,18 @@ def test_train_resume_evaluate_plot(tmp_path: Path, capsys: pytest.CaptureFixtur
     assert_one_line_error(code, err, "other settings", "seed")
 
     code, out, err = run_cli(["rl", "evaluate", run, "--episodes", "2", "--no-progress"], capsys)
-    assert code == 0, err and "marines per episode" in out
+    assert code == 0, err
+    assert "marines per episode" in out
     result = json.loads((run / "eval.json").read_text())
     assert result["episodes"] == 2 and result["seeds"] == [1_000_000, 1_000_001]
-    assert len(result["marines"]) == 2
+    assert len(result["marines"]) == 2 and result["deterministic"]
+    # Sampled actions report beside the deterministic one, never over it.
+    code, out, err = run_cli(["rl", "evaluate", run, "--episodes", "1", "--stochastic",
+                              "--no-progress"], capsys)
+    assert code == 0, err
+    sampled = json.loads((run / "eval-stochastic.json").read_text())
+    assert not sampled["deterministic"] and sampled["episodes"] == 1
+    assert json.loads((run / "eval.json").read_text()) == result
 
     png = tmp_path / "curves.png"
     code, out, err = run_cli(["rl", "plot", run, run, "--out", png], capsys)

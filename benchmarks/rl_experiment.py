@@ -1,0 +1,180 @@
+"""The narration-guided RL experiment: action spaces × rewards × seeds, one step budget per space.
+
+Each run is ``sc2data rl train`` (one env, one torch thread, so ``--jobs 2`` fills two cores),
+then ``sc2data rl evaluate`` on seeded episodes training never used, deterministic and
+sampled. Everything is resumable: rerunning the same command resumes unfinished training runs
+(``rl train`` resumes itself) and skips evaluations already written for the trained step count.
+Narration runs wait until the MEM run (``--mem``) has finished training. Prints and writes
+``OUT/summary.md`` (the table of BENCHMARKS.md) and one learning-curve PNG per action space.
+
+    python benchmarks/rl_experiment.py --out /tmp/rl-exp --mem RUN \\
+        --steps macro=40960 paper=20480 --seeds 0 1 2 --jobs 2
+    python benchmarks/rl_experiment.py --out /tmp/rl-exp --summary      # the table alone
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import shlex
+import subprocess
+import sys
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+SC2DATA = [sys.executable, "-m", "sc2data.cli"]
+REWARDS = ("sparse", "rules", "narration")
+
+
+def sh(args: list[str], log: Path) -> float:
+    """Run one sc2data command (echoed, output appended to ``log``); its wall seconds."""
+    print("$ sc2data " + shlex.join(args), flush=True)
+    t0 = time.perf_counter()
+    with open(log, "a") as f:
+        f.write("$ sc2data " + shlex.join(args) + "\n")
+        f.flush()
+        subprocess.run([*SC2DATA, *args], check=True, stdout=f, stderr=subprocess.STDOUT)
+    return time.perf_counter() - t0
+
+
+def wait_for_mem(mem: Path) -> None:
+    """Block until the MEM run's ``state.json`` says it finished training."""
+    while True:
+        try:
+            if json.loads((mem / "state.json").read_text()).get("finished"):
+                return
+        except (OSError, ValueError):
+            pass
+        time.sleep(20)
+
+
+def _read(path: Path) -> Any:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def one_run(out: Path, space: str, reward: str, seed: int, steps: int, a: argparse.Namespace,
+            mem_lock: threading.Lock, name: str | None = None,
+            narration: Path | None = None) -> None:
+    """Train and evaluate one run; its wall times go to ``RUN.times.json`` beside it."""
+    name = name or f"{space}-{reward}-s{seed}"
+    run = out / space / name
+    run.parent.mkdir(parents=True, exist_ok=True)
+    log = out / space / f"{name}.log"
+    times_file = out / space / f"{name}.times.json"
+    times: dict[str, float] = _read(times_file) or {}
+    args = ["rl", "train", "--action-space", space, "--reward", reward, "--steps", str(steps),
+            "--envs", "1", "--seed", str(seed), "--out", str(run), "--no-progress"]
+    if reward == "narration":
+        with mem_lock:
+            wait_for_mem(a.mem)
+        args += ["--mem", str(a.mem)]
+        if narration is not None:
+            args += ["--narration", str(narration)]
+    state = _read(run / "state.json") or {}
+    if state.get("timesteps", 0) < steps:
+        times["train_s"] = times.get("train_s", 0.0) + sh(args, log)
+        times_file.write_text(json.dumps(times))
+    trained = (_read(run / "state.json") or {}).get("timesteps")
+    for file, extra in (("eval.json", []), ("eval-stochastic.json", ["--stochastic"])):
+        done = _read(run / file)
+        if done and done.get("trained_timesteps") == trained and \
+                done.get("episodes") == a.eval_episodes:
+            continue
+        times[file] = sh(["rl", "evaluate", str(run), "--episodes", str(a.eval_episodes),
+                          "--no-progress", *extra], log)
+        times_file.write_text(json.dumps(times))
+
+
+def fmt(values: list[float]) -> str:
+    return f"{np.mean(values):.1f} ± {np.std(values):.1f}" if values else "—"
+
+
+def summary(out: Path, last: int = 10) -> str:
+    """The results table: per action space and reward, over seeds."""
+    lines = ["| space | reward | runs | decisions | pysc2 steps | training episodes | "
+             f"marines, first {last} episodes | marines, last {last} episodes | "
+             "evaluate deterministic | evaluate sampled | train min / run |",
+             "| --- | --- | ---: | ---: | ---: | ---: | --- | --- | --- | --- | ---: |"]
+    for space_dir in sorted(p for p in out.iterdir() if p.is_dir()):
+        groups: dict[str, list[Path]] = {}
+        for run in sorted(p for p in space_dir.iterdir() if (p / "config.json").is_file()):
+            groups.setdefault(run.name.rsplit("-s", 1)[0].split("-", 1)[1], []).append(run)
+        for reward, runs in groups.items():
+            first, final, det, sto, mins, steps, env_steps, eps = [], [], [], [], [], [], [], []
+            for run in runs:
+                curve = (_read(run / "curve.json") or {}).get("episodes", [])
+                m = [r["marines"] for r in curve]
+                first.append(float(np.mean(m[:last]))) if m else None
+                final.append(float(np.mean(m[-last:]))) if m else None
+                eps.append(len(m))
+                st = _read(run / "state.json") or {}
+                steps.append(st.get("timesteps", 0))
+                env_steps.append(st.get("env_steps", 0))
+                for file, into in (("eval.json", det), ("eval-stochastic.json", sto)):
+                    e = _read(run / file)
+                    if e:
+                        into.append(e["mean"])
+                t = _read(space_dir / f"{run.name}.times.json") or {}
+                if "train_s" in t:
+                    mins.append(t["train_s"] / 60)
+            lines.append(
+                f"| {space_dir.name} | {reward} | {len(runs)} | {int(np.median(steps)):,} | "
+                f"{int(np.median(env_steps)):,} | {int(np.median(eps))} | {fmt(first)} | "
+                f"{fmt(final)} | {fmt(det)} | {fmt(sto)} | "
+                f"{np.median(mins) if mins else float('nan'):.1f} |")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, default=Path("/tmp/rl-exp"))
+    ap.add_argument("--mem", type=Path, help="MEM run for the narration reward.")
+    ap.add_argument("--steps", nargs="*", default=["macro=40960", "paper=20480"],
+                    help="SPACE=DECISIONS per run, one per action space to run.")
+    ap.add_argument("--rewards", nargs="*", default=list(REWARDS), choices=REWARDS)
+    ap.add_argument("--seeds", nargs="*", type=int, default=[0, 1, 2])
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--eval-episodes", type=int, default=10)
+    ap.add_argument("--paraphrased", type=Path, help="Also one macro narration run (seed 0) with "
+                    "this narration file.")
+    ap.add_argument("--summary", action="store_true", help="Only print the table.")
+    a = ap.parse_args()
+    out: Path = a.out
+    if not a.summary:
+        budgets = dict(s.split("=", 1) for s in a.steps)
+        if "narration" in a.rewards and a.mem is None:
+            ap.error("the narration reward needs --mem")
+        out.mkdir(parents=True, exist_ok=True)
+        print(f"# {platform.node()} {platform.processor() or platform.machine()}, "
+              f"{time.strftime('%Y-%m-%d %H:%M')}", flush=True)
+        lock = threading.Lock()
+        jobs: list[tuple[Any, ...]] = [
+            (space, reward, seed, int(budget)) for reward in a.rewards
+            for space, budget in budgets.items() for seed in a.seeds]
+        with ThreadPoolExecutor(a.jobs) as pool:
+            futures = [pool.submit(one_run, out, *job, a, lock) for job in jobs]
+            if a.paraphrased is not None and "macro" in budgets:
+                futures.append(pool.submit(one_run, out, "macro", "narration", 0,
+                                           int(budgets["macro"]), a, lock,
+                                           "macro-paraphrased-s0", a.paraphrased))
+            for f in futures:
+                f.result()
+        for space in budgets:
+            runs = sorted(str(p) for p in (out / space).iterdir() if (p / "config.json").is_file())
+            sh(["rl", "plot", *runs, "--out", str(out / f"curves-{space}.png")], out / "plot.log")
+    table = summary(out)
+    print(table)
+    (out / "summary.md").write_text(table + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -87,3 +87,25 @@ def plot_cmd(
     from sc2data.rl.train import plot
 
     typer.echo(f"wrote {plot(runs, out, window)}")
+
+
+@app.command("agreement")
+def agreement_cmd(
+    run: Path = typer.Argument(..., help="Run folder of sc2data rl train (the policy)."),
+    mem: Path = typer.Option(..., "--mem", help="Trained MEM run (sc2data train --out)."),
+    episodes: int = typer.Option(3, "--episodes", help="Seeded episodes to play."),
+    deterministic: bool = typer.Option(False, "--deterministic",
+                                       help="Play the most likely action instead of sampling."),
+    threshold: Optional[float] = typer.Option(None, "--threshold",
+                                              help="MEM match threshold [the model's: 0.5]."),
+    out: Optional[Path] = typer.Option(None, "--out", help="JSON file [RUN/agreement.json]."),
+) -> None:
+    """On the states a trained policy visits: per command, how often the MEM's match agrees
+    with the labelling rule (precision and recall, the rule as ground truth)."""
+    from sc2data.rl.agreement import agreement, summary
+    from sc2data.rl.train import require_rl
+
+    require_rl("sc2data rl agreement")
+    for line in summary(agreement(run, mem, episodes=episodes, deterministic=deterministic,
+                                  threshold=threshold, out=out)):
+        typer.echo(line)

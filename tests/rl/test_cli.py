@@ -123,3 +123,33 @@ def test_missing_extra_names_the_install(tmp_path: Path, capsys: pytest.CaptureF
     code, _, err = run_cli(["rl", "train", "--out", tmp_path / "run", *TINY], capsys)
     assert_one_line_error(code, err, "sb3-contrib", "pip install 'sc2data[rl]'")
     assert not (tmp_path / "run").exists()
+
+
+def test_agreement_counts_add_up_and_follow_the_threshold(
+        mem_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    run = tmp_path / "run"
+    code, _, err = run_cli(["rl", "train", "--out", run, *TINY], capsys)
+    assert code == 0, err
+    results = {}
+    for threshold in ("0", "100"):
+        out = tmp_path / f"agree-{threshold}.json"
+        code, text, err = run_cli(["rl", "agreement", run, "--mem", mem_run, "--episodes", "1",
+                                   "--threshold", threshold, "--out", out], capsys)
+        assert code == 0, err
+        assert "precision" in text and "build_scv" in text
+        results[threshold] = json.loads(out.read_text())
+    never, always = results["0"], results["100"]
+    assert never["stacks"] == always["stacks"] == 40  # one 40-step episode, one stack a step
+    for cid, c in always["commands"].items():
+        # The rules do not depend on the threshold; the MEM matches everything or nothing.
+        assert c["rule_fired"] == never["commands"][cid]["rule_fired"]
+        assert c["tp"] + c["fn"] == c["rule_fired"] and c["tp"] + c["fp"] == c["mem_matched"]
+        assert c["mem_matched"] == 40 and never["commands"][cid]["mem_matched"] == 0
+        assert c["recall"] == (1.0 if c["rule_fired"] else None)
+        assert never["commands"][cid]["precision"] is None
+    assert always["null_unmatched"] in (0.0, None) and never["null_unmatched"] in (1.0, None)
+    assert sum(c["rule_fired"] for c in always["commands"].values()) > 0  # collect_minerals
+    code, _, err = run_cli(["rl", "agreement", run, "--mem", tmp_path / "nope"], capsys)
+    assert_one_line_error(code, err, "does not exist")
+    code, _, err = run_cli(["rl", "agreement", tmp_path, "--mem", mem_run], capsys)
+    assert_one_line_error(code, err, "not a trained sc2data rl run")

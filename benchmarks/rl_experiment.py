@@ -8,7 +8,8 @@ Narration runs wait until the MEM run (``--mem``) has finished training. Prints 
 ``OUT/summary.md`` (the table of BENCHMARKS.md) and one learning-curve PNG per action space.
 
     python benchmarks/rl_experiment.py --out /tmp/rl-exp --mem RUN \\
-        --steps macro=40960 paper=20480 --seeds 0 1 2 --jobs 2
+        --steps macro=16384 paper=8192 --seeds 0 1 2 --jobs 2 \\
+        --eval-episodes macro=5 paper=2
     python benchmarks/rl_experiment.py --out /tmp/rl-exp --summary      # the table alone
 """
 
@@ -84,12 +85,12 @@ def one_run(out: Path, space: str, reward: str, seed: int, steps: int, a: argpar
         times["train_s"] = times.get("train_s", 0.0) + sh(args, log)
         times_file.write_text(json.dumps(times))
     trained = (_read(run / "state.json") or {}).get("timesteps")
+    episodes = int(dict(s.split("=", 1) for s in a.eval_episodes)[space])
     for file, extra in (("eval.json", []), ("eval-stochastic.json", ["--stochastic"])):
         done = _read(run / file)
-        if done and done.get("trained_timesteps") == trained and \
-                done.get("episodes") == a.eval_episodes:
+        if done and done.get("trained_timesteps") == trained and done.get("episodes") == episodes:
             continue
-        times[file] = sh(["rl", "evaluate", str(run), "--episodes", str(a.eval_episodes),
+        times[file] = sh(["rl", "evaluate", str(run), "--episodes", str(episodes),
                           "--no-progress", *extra], log)
         times_file.write_text(json.dumps(times))
 
@@ -143,7 +144,8 @@ def main() -> None:
     ap.add_argument("--rewards", nargs="*", default=list(REWARDS), choices=REWARDS)
     ap.add_argument("--seeds", nargs="*", type=int, default=[0, 1, 2])
     ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--eval-episodes", type=int, default=10)
+    ap.add_argument("--eval-episodes", nargs="*", default=["macro=5", "paper=2"],
+                    help="SPACE=EPISODES of each evaluation (deterministic, then sampled).")
     ap.add_argument("--paraphrased", type=Path, help="Also one macro narration run (seed 0) with "
                     "this narration file.")
     ap.add_argument("--summary", action="store_true", help="Only print the table.")

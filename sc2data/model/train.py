@@ -24,6 +24,7 @@ the same command is run again, to the result an uninterrupted run gives.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
@@ -37,13 +38,17 @@ from typing import Any
 import numpy as np
 
 from sc2data.errors import MissingDependencyError, Sc2DataError
-from sc2data.files import LOCK, FolderLock, atomic_file, sha256_file, write_atomic
+from sc2data.files import LOCK, FolderLock, atomic_file, publish, sha256_file, write_atomic
 from sc2data.model.words import load_word_vectors
 from sc2data.pairs.loader import PairLoader, PairSet
 from sc2data.provenance import versions
 
-RUN_FILES = ("config.json", "metrics.jsonl", "best.pt", "last.pt", "state.json", "eval.json",
-             "tsne.png")
+CHECKPOINTS = ("best.pt", "last.pt")
+NEXT = ".next"
+"""An epoch writes its checkpoints as ``best.pt.next`` / ``last.pt.next``, records them in
+``state.json``, then renames them: a run cut anywhere in between resumes (see ``_settle``)."""
+RUN_FILES = ("config.json", "metrics.jsonl", *CHECKPOINTS, *(c + NEXT for c in CHECKPOINTS),
+             "state.json", "eval.json", "tsne.png")
 STATE_FILE = "state.json"
 RESUME_IGNORES = ("out", "overwrite", "progress", "name")
 """Config fields that may differ between an interrupted run and the rerun that resumes it."""
@@ -278,7 +283,7 @@ def train(cfg: TrainConfig) -> Path:
                 row["best"] = bool(val_loss < best) if vsums[2] else True
                 if row["best"]:
                     best = val_loss if vsums[2] else best
-                    M.save_checkpoint(run / "best.pt", model, words.words if words else (), {
+                    M.save_checkpoint(run / f"best.pt{NEXT}", model, words.words if words else (), {
                         "config": config, "epoch": epoch, "val_loss": val_loss,
                         "vectors_source": text_source, "vectors_digest": text_digest,
                         **({"sentences": sentence_state} if sentences else {}),
@@ -286,13 +291,14 @@ def train(cfg: TrainConfig) -> Path:
                 log.write(json.dumps(row) + "\n")
                 log.flush()
                 os.fsync(log.fileno())
-                with atomic_file(run / "last.pt") as tmp:
+                with atomic_file(run / f"last.pt{NEXT}") as tmp:
                     torch.save({"epoch": epoch, "best": best, "model": model.state_dict(),
                                 "optimizer": optimizer.state_dict(),
                                 "torch_rng": torch.get_rng_state(),
                                 "numpy_rng": np.random.get_state(),
                                 "python_rng": random.getstate()}, tmp)
                 _write_state(run, epoch, cfg.epochs)
+                _settle(run, read_state(run))
                 if cfg.progress:
                     tqdm.write(f"epoch {epoch:>3}  train loss {row['train_loss']:.4f} acc "
                                f"{row['train_acc']:.2%}  val loss {val_loss:.4f} acc "
@@ -331,6 +337,8 @@ def _prepare_run(run: Path, cfg: TrainConfig) -> dict[str, Any] | None:
             raise Sc2DataError(f"run folder {run} holds an unfinished run with other settings "
                                f"(differs in: {', '.join(diff)}); rerun it with its own "
                                f"settings to resume, or pass --overwrite")
+        _settle(run, state)
+        _keep_rows(run / "metrics.jsonl", int(state["epochs_done"]))  # a row logged after it
         check_run(run, allow_unfinished=True, files=("config.json", "last.pt", "metrics.jsonl"))
         return state
     if not cfg.overwrite:
@@ -349,11 +357,32 @@ def _keep_rows(path: Path, n: int) -> None:
 
 
 def _write_state(run: Path, epoch: int, epochs: int) -> None:
-    """Record progress and every run file's sha256, after the files themselves."""
-    names = [n for n in ("config.json", "metrics.jsonl", "best.pt", "last.pt") if (run / n).exists()]
-    state = {"epochs_done": epoch, "epochs": epochs, "finished": epoch == epochs,
-             "sha256": {n: sha256_file(run / n) for n in names}}
+    """Record progress and every run file's sha256, after the files themselves: an epoch's new
+    checkpoints (``*.pt.next``) are recorded under their final names, which they take after."""
+    sums = {}
+    for n in ("config.json", "metrics.jsonl", *CHECKPOINTS):
+        path = run / f"{n}{NEXT}" if (run / f"{n}{NEXT}").is_file() else run / n
+        if path.exists():
+            sums[n] = sha256_file(path)
+    state = {"epochs_done": epoch, "epochs": epochs, "finished": epoch == epochs, "sha256": sums}
     write_atomic(run / STATE_FILE, (json.dumps(state, indent=1) + "\n").encode())
+
+
+def _settle(run: Path, state: dict[str, Any] | None, *, discard: bool = True) -> None:
+    """Finish or undo an epoch cut between its files and its ``state.json``: a ``*.pt.next`` that
+    ``state.json`` records takes its final name (the epoch was committed); one it does not record
+    is removed (``discard``; the epoch is done again on resume)."""
+    for name in CHECKPOINTS:
+        pending = run / f"{name}{NEXT}"
+        if not pending.is_file():
+            continue
+        if state is not None and state["sha256"].get(name) == sha256_file(pending):
+            try:
+                publish(pending, run / name)
+            except FileNotFoundError:  # another reader settled it first
+                pass
+        elif discard:
+            pending.unlink(missing_ok=True)
 
 
 def read_state(run: Path) -> dict[str, Any] | None:
@@ -371,6 +400,16 @@ def read_state(run: Path) -> dict[str, Any] | None:
     return state
 
 
+def _digest(run: Path, name: str, state: dict[str, Any]) -> str:
+    """sha256 of a run file as ``state.json`` recorded it: of ``metrics.jsonl``, its first
+    ``epochs_done`` rows (a row logged after the state was recorded is not yet part of it)."""
+    if name != "metrics.jsonl":
+        return sha256_file(run / name)
+    n = int(state.get("epochs_done", 0))
+    rows = (run / name).read_bytes().splitlines(keepends=True)[:n]
+    return hashlib.sha256(b"".join(rows)).hexdigest()
+
+
 def check_run(run: Path, *, allow_unfinished: bool = False,
               files: tuple[str, ...] = ("config.json", "best.pt")) -> dict[str, Any]:
     """One-line error unless ``run`` is a run folder whose ``files`` are the bytes training
@@ -379,13 +418,14 @@ def check_run(run: Path, *, allow_unfinished: bool = False,
     if state is None:
         raise Sc2DataError(f"{run} has no {STATE_FILE}: not a run of this sc2data, or one "
                            f"interrupted before its first epoch; train it again")
+    _settle(run, state, discard=False)  # an epoch committed but not yet renamed: finish it
     if not state["finished"] and not allow_unfinished:
         raise Sc2DataError(f"{run} is an unfinished run ({state.get('epochs_done')} of "
                            f"{state.get('epochs')} epochs); rerun the same sc2data train command "
                            f"to finish it, or pass --allow-unfinished")
     for name in files:
         digest = state["sha256"].get(name)
-        if not (run / name).is_file() or digest is None or sha256_file(run / name) != digest:
+        if not (run / name).is_file() or digest is None or _digest(run, name, state) != digest:
             raise Sc2DataError(f"{run / name} is missing, damaged or was replaced (its sha256 "
                                f"differs from {STATE_FILE}); train the run again")
     return state

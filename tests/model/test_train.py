@@ -234,6 +234,49 @@ def test_interrupted_run_resumes_to_the_uninterrupted_result(
         train_tiny(data, tmp_path / "cut2", epochs=3, lr=1e-3)
 
 
+@pytest.mark.parametrize("cut", ["before state.json", "after state.json"])
+def test_a_run_cut_between_an_epochs_files_resumes(
+        cut: str, data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Killed after epoch 2's checkpoints and metrics row but before its state.json (the epoch
+    is done again), or after state.json but before the checkpoints take their names (it is
+    kept): verify says OK, and the rerun ends where an uninterrupted run does."""
+    import torch
+
+    import sc2data.model.train as T
+    from sc2data.folders import verify_folder
+
+    whole = train_tiny(data, tmp_path / "whole", epochs=3)
+    real_state, real_settle = T._write_state, T._settle
+
+    def die_before_state(run: Path, epoch: int, epochs: int) -> None:
+        if epoch == 2:
+            raise KeyboardInterrupt
+        real_state(run, epoch, epochs)
+
+    def die_before_rename(run: Path, state: object, **kw: object) -> None:
+        if isinstance(state, dict) and state["epochs_done"] == 2:
+            raise KeyboardInterrupt
+        real_settle(run, state, **kw)  # type: ignore[arg-type]
+
+    if cut == "before state.json":
+        monkeypatch.setattr(T, "_write_state", die_before_state)
+    else:
+        monkeypatch.setattr(T, "_settle", die_before_rename)
+    cut_run = tmp_path / "cut"
+    with pytest.raises(KeyboardInterrupt):
+        train_tiny(data, cut_run, epochs=3)
+    monkeypatch.setattr(T, "_write_state", real_state)
+    monkeypatch.setattr(T, "_settle", real_settle)
+    assert (cut_run / "last.pt.next").is_file()
+    kind, faults, _ = verify_folder(cut_run)
+    assert kind == "training run" and not faults, faults
+    train_tiny(data, cut_run, epochs=3)
+    assert _metrics(cut_run) == _metrics(whole)
+    assert not list(cut_run.glob("*.next"))
+    a, b = (torch.load(r / "best.pt", weights_only=True)["state_dict"] for r in (whole, cut_run))
+    assert all(torch.equal(a[k], b[k]) for k in a)
+
+
 def test_damaged_checkpoint_is_refused(data: Path, tmp_path: Path) -> None:
     run = train_tiny(data, tmp_path / "run", epochs=1)
     with open(run / "best.pt", "r+b") as f:

@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from sc2data.errors import Sc2DataError
-from sc2data.files import LOCK, FolderLock
+from sc2data.files import LOCK, FolderLock, check_out
 from sc2data.recipe import Recipe
 
 if TYPE_CHECKING:
@@ -70,6 +70,7 @@ def build(recipe: Recipe, out: str | os.PathLike[str], *, workers: int = 1,
     check_requirements(rules, config.schema, f"recipe {recipe.name!r} ({config.layers} layers)")
     if out.exists() and not out.is_dir():
         raise Sc2DataError(f"output {out} exists and is not a folder; choose another --out")
+    check_out(out)
     made = not out.exists()
     try:
         out.mkdir(parents=True, exist_ok=True)

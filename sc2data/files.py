@@ -139,3 +139,13 @@ class FolderLock:
 
     def __exit__(self, *exc: object) -> None:
         os.close(self._fd)
+
+
+def check_out(path: Path, flag: str = "--out") -> None:
+    """One line unless ``path`` can be created where it is: no folder above it is a file."""
+    for above in Path(path).parents:
+        if above.exists():
+            if not above.is_dir():
+                raise Sc2DataError(f"cannot write {path}: {above} is a file, not a folder; "
+                                   f"choose another {flag}")
+            return

@@ -97,3 +97,22 @@ def test_build_finds_rules_in_rules_dir(tmp_path: Path, capsys: pytest.CaptureFi
                             str(rules), "--no-progress"], capsys)
     # the rule is found, the data is rolled out and labelled; one episode has too few states
     assert "unknown rule" not in err and (tmp_path / "out" / "rollout" / "labels.parquet").exists()
+
+
+def test_out_under_a_regular_file_is_one_line_before_any_work(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from tests.mem_helpers import tiny_pairset, train_tiny
+
+    blocker = tmp_path / "file"
+    blocker.write_text("a file, not a folder")
+    data = tiny_pairset(tmp_path / "pairs")
+    run = train_tiny(data, tmp_path / "run", epochs=1)
+    for args in (["train", data, "--out", blocker / "run", "--epochs", "1"],
+                 ["tsne", run, "--out", blocker / "x" / "tsne.png"],
+                 ["pair", ROOT / "manifests" / "smoke.toml", "--data", tmp_path / "nowhere",
+                  "--out", blocker / "pairs"],
+                 ["build", ROOT / "manifests" / "smoke.toml", "--out", blocker / "build"]):
+        code, _, err = run_cli(args, capsys)
+        assert_one_line_error(code, err, f"{blocker} is a file, not a folder", "--out")
+    assert blocker.read_text() == "a file, not a folder"
+    assert not list(tmp_path.glob("**/*.partial")) and not (run / "tsne.png").exists()

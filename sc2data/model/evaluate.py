@@ -20,6 +20,7 @@ Each state and each text is embedded once; pair distances are gathered from thos
 
 from __future__ import annotations
 
+import io
 import json
 import os
 from collections.abc import Sequence
@@ -29,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from sc2data.errors import Sc2DataError
-from sc2data.files import write_atomic
+from sc2data.files import check_out, write_atomic
 from sc2data.model.reward import MEMScorer, load_model, pairwise
 from sc2data.pairs.loader import PairSet
 from sc2data.vocab import SPLITS
@@ -298,6 +299,8 @@ def tsne(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None
          out: str | os.PathLike[str] | None = None, states: int = 2000, seed: int = 0,
          texts: Sequence[str] = (), device: str = "auto", allow_unfinished: bool = False) -> Path:
     """Plot test-state and command embeddings in one t-SNE map (the paper's Fig. 3) as a PNG."""
+    if out is not None:
+        check_out(Path(out))
     import matplotlib
 
     matplotlib.use("Agg")
@@ -360,8 +363,15 @@ def tsne(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None
     path = Path(out) if out else run / "tsne.png"
     fig.tight_layout()
     _declutter(fig, notes)
-    fig.savefig(path, dpi=130)
+    png = io.BytesIO()
+    fig.savefig(png, format="png", dpi=130)
     plt.close(fig)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_atomic(path, png.getvalue())
+    except OSError as e:
+        raise Sc2DataError(f"cannot write {path}: {e.strerror or e}; choose another --out") \
+            from None
     return path
 
 

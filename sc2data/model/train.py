@@ -38,7 +38,8 @@ from typing import Any
 import numpy as np
 
 from sc2data.errors import MissingDependencyError, Sc2DataError
-from sc2data.files import LOCK, FolderLock, atomic_file, publish, sha256_file, write_atomic
+from sc2data.files import (LOCK, FolderLock, atomic_file, check_out, publish, sha256_file,
+                           write_atomic)
 from sc2data.model.words import load_word_vectors
 from sc2data.pairs.loader import PairLoader, PairSet
 from sc2data.provenance import versions
@@ -313,6 +314,7 @@ def _make_run_folder(run: Path) -> Path:
     """Create the run folder (and its parents), or say in one line why it cannot be."""
     if run.exists() and not run.is_dir():
         raise Sc2DataError(f"{run} exists and is not a folder; choose another --out")
+    check_out(run)
     try:
         run.mkdir(parents=True, exist_ok=True)
     except OSError as e:

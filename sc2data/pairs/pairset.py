@@ -22,7 +22,7 @@ import pyarrow.parquet as pq
 
 from sc2data.data.dataset import Dataset
 from sc2data.errors import Sc2DataError
-from sc2data.files import PARTIAL, FolderLock, fsync_path, publish, sha256_files
+from sc2data.files import PARTIAL, FolderLock, check_out, fsync_path, publish, sha256_files
 from sc2data.formats import PAIRSET
 from sc2data.pairs.draw import Labelled, build_pairs
 from sc2data.pairs.layout import (
@@ -174,6 +174,7 @@ def make_pairset(recipe: Recipe, data: str | os.PathLike[str], out: str | os.Pat
     """Build the recipe's pair set from the labelled dataset ``data`` into the folder ``out``."""
     started = time.perf_counter()
     data, out = Path(data), Path(out)
+    check_out(out)
     labelled, labels_meta = labelled_stacks(recipe, data)
     try:
         out.parent.mkdir(parents=True, exist_ok=True)

@@ -146,12 +146,12 @@ def test_recipe_text_must_be_the_rules_command(tmp_path: Path) -> None:
     from sc2data.recipe import parse
 
     recipe = parse(tomllib.loads(RECIPE.replace('text = "train a marine"',
-                                                'text = "train a soldier"')), "t.toml")
+                                                'text = "train a trooper"')), "t.toml")
     rules = {c.id: c.text for c in recipe.commands} | {"train_marine": "train a marine"}
-    with pytest.raises(Sc2DataError, match="command train_marine has text 'train a soldier', but "
+    with pytest.raises(Sc2DataError, match="command train_marine has text 'train a trooper', but "
                                            "rule train_marine says 'train a marine'"):
         check_texts(recipe, rules)
-    check_texts(recipe, rules | {"train_marine": "train a soldier"})  # agreeing: no error
+    check_texts(recipe, rules | {"train_marine": "train a trooper"})  # agreeing: no error
 
 
 def test_damaged_pair_set_is_rebuilt_not_up_to_date(built: Path, tmp_path: Path) -> None:

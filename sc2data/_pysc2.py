@@ -42,12 +42,12 @@ random.shuffle = _shuffle_compat  # type: ignore[assignment]
 try:
     from pysc2.agents import base_agent  # noqa: E402
     from pysc2.env import environment, sc2_env  # noqa: E402
-    from pysc2.lib import actions, colors, features, point, units  # noqa: E402
+    from pysc2.lib import actions, buffs, colors, features, point, units  # noqa: E402
 finally:
     random.shuffle = _shuffle
 
-__all__ = ["actions", "base_agent", "colors", "environment", "features", "interface_format", "point", "sc2_env",
-           "units"]
+__all__ = ["actions", "base_agent", "buffs", "colors", "environment", "features",
+           "interface_format", "point", "sc2_env", "units"]
 
 
 def interface_format() -> sc2_env.AgentInterfaceFormat:

@@ -170,17 +170,72 @@ def label(
 
 @app.command()
 def render(
-    out: str = typer.Option(..., "--out", help="PNG file to write."),
-    env: str = typer.Option("sim", "--env", help="Backend: sim (embedded) or sc2 (real game)."),
-    seed: int = typer.Option(0, "--seed", help="Seed for the environment and the agent."),
-    steps: int = typer.Option(300, "--steps", help="Agent steps to play before the frame."),
-    agent: str = typer.Option("scripted", "--agent", help="Agent: random, reduced-random, scripted."),
+    data: Optional[Path] = typer.Argument(None, help="Dataset folder (sc2data rollout --out, or a "
+                                          "build's OUT/rollout) to draw stored stacks of; "
+                                          "without it, a live frame."),
+    episode: Optional[int] = typer.Option(None, "--episode", help="With DATA: the stack's "
+                                          "episode."),
+    step: Optional[int] = typer.Option(None, "--step", help="With DATA: the stack's step in that "
+                                       "episode (frames STEP and STEP+1)."),
+    rule: Optional[str] = typer.Option(None, "--rule", help="With DATA: draw stacks this rule "
+                                       "fired on (needs sc2data label DATA)."),
+    limit: Optional[int] = typer.Option(None, "--limit", help="With --rule: how many stacks, "
+                                        "spread evenly over those it fired on [default: 8]."),
+    out: Optional[str] = typer.Option(None, "--out", help="PNG file to write; with --rule, a "
+                                      "folder for the PNGs [default with DATA: "
+                                      "./<DATA name>-e<E>-s<S>.png or ./<DATA name>-<RULE>/]."),
+    env: Optional[str] = typer.Option(None, "--env", help="Live: sim (embedded, default) or sc2 "
+                                      "(real game)."),
+    seed: Optional[int] = typer.Option(None, "--seed", help="Live: seed for the environment and "
+                                       "the agent [default: 0]."),
+    steps: Optional[int] = typer.Option(None, "--steps", help="Live: agent steps to play before "
+                                        "the frame [default: 300]."),
+    agent: Optional[str] = typer.Option(None, "--agent", help="Live: random, reduced-random or "
+                                        "scripted (default)."),
 ) -> None:
-    """Play N steps and draw that frame's 27 screen and 11 minimap layers, coloured as pysc2 does."""
-    from sc2data.game.render import render_episode
+    """Draw feature layers as PNGs, coloured as pysc2 does, each categorical layer's ids in a
+    legend with pysc2's names and an all-zero layer marked "empty".
 
-    path = render_episode(out, env=env, seed=seed, steps=steps, agent=agent)
-    typer.echo(f"wrote {path}")
+    Live (no DATA): play --steps steps and draw that frame's 27 screen and 11 minimap layers to
+    --out.
+
+    DATA --episode E --step S: draw that stored stack, every stored layer, the previous frame
+    above the current one, with both frames' minerals, supply, workers, army and score.
+
+    DATA --rule RULE: one PNG per stack, for --limit of the stacks the rule fired on (spread
+    evenly over all of them, in episode and step order), into the folder --out as
+    e<E>-s<S>.png; page through them to see what the rule takes for its command.
+    """
+    live = {"env": env, "seed": seed, "steps": steps, "agent": agent}
+    stored = {"episode": episode, "step": step, "rule": rule, "limit": limit}
+    wrong = [k for k, v in (stored if data is None else live).items() if v is not None]
+    if wrong:
+        raise Sc2DataError(f"--{wrong[0]} draws stored stacks: give the dataset folder DATA"
+                           if data is None else
+                           f"--{wrong[0]} is for a live render (no DATA); leave it out")
+    if data is None:
+        if out is None:
+            raise Sc2DataError("a live render needs --out PNG")
+        from sc2data.game.render import render_episode
+
+        paths = [render_episode(out, **{k: v for k, v in live.items() if v is not None})]
+    elif rule is not None:
+        if episode is not None or step is not None:
+            raise Sc2DataError("--rule draws the stacks a rule fired on; leave out --episode "
+                               "and --step")
+        from sc2data.labels.view import DEFAULT_LIMIT, render_rule
+
+        paths = render_rule(data, rule, out or f"{data.name}-{rule}",
+                            DEFAULT_LIMIT if limit is None else limit)
+    elif episode is None or step is None or limit is not None:
+        raise Sc2DataError("with DATA, give --episode E --step S, or --rule RULE [--limit N]")
+    else:
+        from sc2data.labels.view import render_stored
+
+        paths = [render_stored(data, episode, step,
+                               out or f"{data.name}-e{episode}-s{step}.png")]
+    for path in paths:
+        typer.echo(f"wrote {path}")
 
 
 @app.command()

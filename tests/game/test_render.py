@@ -1,4 +1,5 @@
-"""render: a PNG of all feature layers, pixel-exact in pysc2's palettes; the CLI writes one."""
+"""render: a PNG of all feature layers, pixel-exact in pysc2's palettes, with legends of the
+categorical layers' ids and "empty" notes; the CLI writes one of a live frame."""
 
 from __future__ import annotations
 
@@ -14,7 +15,17 @@ from sc2data._pysc2 import features, units  # first: it makes pysc2 importable o
 from pysc2.env import mock_sc2_env  # isort: skip
 from sc2data.cli import main
 from sc2data.game.env import interface_format
-from sc2data.game.render import SCALE, colorize, layout, render_frame
+from sc2data.game.render import (
+    SCALE,
+    Entry,
+    colorize,
+    empty_tiles,
+    id_name,
+    layout,
+    legend,
+    observation_frame,
+    render_frame,
+)
 
 _S, _M = features.SCREEN_FEATURES, features.MINIMAP_FEATURES
 
@@ -44,7 +55,7 @@ def _run(*argv: str) -> int:
 def _tile(png: np.ndarray, index: int, y: int, x: int) -> np.ndarray:
     """The RGB colour at layer pixel (y, x) of tile ``index``, read back from the PNG."""
     _, _, origins = layout(len(_S), len(_M), 64)
-    ox, oy = origins[index]
+    ox, oy = origins[index][0]
     return png[oy + y * SCALE + SCALE // 2, ox + x * SCALE + SCALE // 2, :3]
 
 
@@ -106,3 +117,51 @@ def test_unwritable_output_is_one_line(tmp_path: Path, capsys: pytest.CaptureFix
     assert _run("render", "--steps", "1", "--out", str(blocker / "f.png")) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("sc2data: error: cannot write the PNG to")
+
+
+def test_legend_names_the_ids_present_by_pysc2_name() -> None:
+    obs = _observation()
+    plane = obs["feature_screen"][_S.unit_type.index]
+    entries = legend("screen/unit_type", [plane])
+    assert [(e.id, e.name) for e in entries] == [
+        (units.Terran.CommandCenter, "Terran.CommandCenter"), (units.Terran.Marine, "Terran.Marine")]
+    cc = np.clip(_S.unit_type.palette[units.Terran.CommandCenter], 0, 255).astype(np.uint8)
+    assert entries[0].color == tuple(int(c) for c in cc) and entries[0].frames == (0,)
+    relative = legend("screen/player_relative", [obs["feature_screen"][_S.player_relative.index]])
+    assert [e.name for e in relative] == ["PlayerRelative.SELF"]
+    assert legend("screen/unit_hit_points", [obs["feature_screen"][_S.unit_hit_points.index]]) == []
+
+
+def test_legend_marks_ids_held_by_one_frame_of_two() -> None:
+    before, after = np.zeros((64, 64), np.uint16), np.zeros((64, 64), np.uint16)
+    before[1, 1] = after[1, 1] = units.Terran.SCV
+    after[5:9, 5:9] = units.Terran.Barracks
+    entries = legend("screen/unit_type", [before, after])
+    assert entries == [  # ascending ids
+        Entry(units.Terran.Barracks, "Terran.Barracks", entries[0].color, (1,)),
+        Entry(units.Terran.SCV, "Terran.SCV", entries[1].color, (0, 1))]
+    assert legend("screen/unit_type", [before * 0, after * 0]) == [], "0 is the background"
+
+
+@pytest.mark.parametrize("key, value, name", [
+    ("minimap/visibility_map", 2, "Visibility.VISIBLE"),
+    ("screen/player_id", 16, "neutral"),
+    ("screen/player_id", 1, "player 1"),
+    ("screen/selected", 1, "selected"),
+    ("minimap/unit_type", 341, "Neutral.MineralField"),
+    ("screen/unit_type", 2, "2"),  # no unit has id 2
+])
+def test_id_names(key: str, value: int, name: str) -> None:
+    assert id_name(key, value) == name
+
+
+def test_empty_tiles_are_the_all_zero_layers_of_each_frame() -> None:
+    frame = observation_frame(_observation())
+    keys = [k for k in frame if "/" in k]
+    empty = {k for k, _ in empty_tiles([frame], keys)}
+    assert "screen/creep" in empty and "screen/effects" in empty
+    assert not {"screen/unit_type", "screen/player_relative", "minimap/camera"} & empty
+    cur = {k: v.copy() for k, v in frame.items()}
+    cur["screen/creep"][3, 3] = 1
+    assert ("screen/creep", 0) in empty_tiles([frame, cur], keys)
+    assert ("screen/creep", 1) not in empty_tiles([frame, cur], keys)

@@ -26,7 +26,7 @@ import hdf5plugin
 import numpy as np
 
 from sc2data.data.chunks import Codec
-from sc2data.data.dataset import open_dataset, write_index, write_manifest
+from sc2data.data.dataset import open_dataset, shard_settings, write_index, write_manifest
 from sc2data.data.rollout import RolloutConfig, index_rows, manifest_for
 from sc2data.data.shards import ShardWriter
 from sc2data.game.agents import make_agent, play
@@ -114,7 +114,7 @@ def build_direct(level: int, chunk: int, episodes: list[dict[str, np.ndarray]], 
     per_frame = [[dict(zip(ep, f)) for f in zip(*ep.values())] for ep in episodes]
 
     def write() -> None:
-        w = ShardWriter(path, schema, config.codec, {"settings": config.settings()})
+        w = ShardWriter(path, schema, config.codec, {"settings": shard_settings(config.settings())})
         for i, frames in enumerate(per_frame):
             w.begin_episode(i, i, i)
             w.add_frame(frames[0])

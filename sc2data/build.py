@@ -8,6 +8,12 @@ The build folder holds the rolled-out dataset (with its labels) and the pair set
 Each stage resumes on its own terms (complete shards are kept, labelled shards are skipped, a
 finished pair set from the same recipe and labels is kept), so rerunning after an interruption
 only does what is left.
+
+When the pair stage finds too few states, the build grows the data to the episodes it asks for
+(rollout adds them, label relabels) and pairs again: at most :data:`GROW_ROUNDS` times, never
+past :data:`GROW_LIMIT` times the recipe's episodes; past that, or when a command never fires,
+it ends with one line saying what the recipe needs. The data never shrinks: a rerun keeps the
+episodes an earlier build grew it to.
 """
 
 from __future__ import annotations
@@ -16,20 +22,25 @@ import contextlib
 import os
 import shutil
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from sc2data.errors import Sc2DataError
 from sc2data.files import LOCK, FolderLock, check_out
-from sc2data.recipe import Recipe
+from sc2data.recipe import MAX_EPISODES, Recipe
 
 if TYPE_CHECKING:
     from sc2data.data.rollout import RolloutConfig
+    from sc2data.pairs.draw import NotEnoughStates
     from sc2data.scaleout.driver import RayOptions
 
 ROLLOUT_DIR = "rollout"
 PAIRS_DIR = "pairs"
+GROW_ROUNDS = 3
+"""Times a build grows its data on its own when the pair stage finds too few states."""
+GROW_LIMIT = 10
+"""A build grows its data to at most this many times the recipe's episodes."""
 
 
 @dataclass
@@ -39,6 +50,10 @@ class BuildReport:
     out: Path
     seconds: dict[str, float] = field(default_factory=dict)
     lines: list[str] = field(default_factory=list)
+
+    def add(self, stage: str, started: float) -> None:
+        """Count the seconds since ``started`` (``time.perf_counter()``) to ``stage``."""
+        self.seconds[stage] = self.seconds.get(stage, 0.0) + time.perf_counter() - started
 
     def table(self) -> str:
         rows = [f"{'stage':<8} {'seconds':>9}"] + [f"{k:<8} {v:>9.1f}" for k, v in
@@ -53,15 +68,21 @@ def build(recipe: Recipe, out: str | os.PathLike[str], *, workers: int = 1,
     """Run every stage of ``recipe`` into ``out``; stages already complete are kept.
 
     ``ray`` (:class:`sc2data.scaleout.driver.RayOptions`): roll out and label as Ray tasks, on one Ray
-    instance or cluster for both stages; the data is the same either way.
+    instance or cluster for both stages; the data is the same either way. Grows the data when
+    the pair stage finds too few states (see the module's docstring).
     """
-    from sc2data.data.rollout import RolloutConfig
+    from sc2data.data.rollout import RolloutConfig, folder_config
 
     out = Path(out)
     report = BuildReport(out)
     data = out / ROLLOUT_DIR
     config = RolloutConfig.from_recipe(recipe)
     config.validate()
+    grown = folder_config(data)  # the data an earlier build grew is kept, never shrunk
+    if grown is not None and grown.episodes > config.episodes:
+        report.lines.append(f"rollout: keeping the {grown.episodes} episodes an earlier build "
+                            f"grew the data to (the recipe asks for {config.episodes})")
+        config = replace(config, episodes=grown.episodes)
     # Every rule the recipe names exists and can read the layers it rolls out, before any work.
     from sc2data.labels.apply import check_requirements
     from sc2data.labels.registry import load_registry
@@ -85,13 +106,52 @@ def build(recipe: Recipe, out: str | os.PathLike[str], *, workers: int = 1,
             shutil.rmtree(out, ignore_errors=True)
 
 
+def grow_to(shortage: NotEnoughStates, have: int, asked: int, rounds: int) -> int:
+    """The episodes to grow the data to after ``shortage`` (the data has ``have``, the recipe
+    asks for ``asked``, the build has grown it ``rounds`` times), or the error that ends it."""
+    from sc2data.pairs.draw import NotEnoughStates
+
+    if shortage.episodes is None:
+        raise shortage  # more data cannot help: it says why
+    want = max(shortage.episodes, have + 1)
+    limit = min(MAX_EPISODES, GROW_LIMIT * asked)
+    if rounds < GROW_ROUNDS and want <= limit:
+        return want
+    raise NotEnoughStates(shortage.shortfall, f"it needs about {want} episodes, and sc2data build "
+                          f"grows the data at most {GROW_ROUNDS} times, to at most {GROW_LIMIT}× "
+                          f"the recipe's {asked} episodes (grown {rounds} times so far); set "
+                          f"[rollout] episodes = {want} in the recipe and rerun", None)
+
+
 def _stages(recipe: Recipe, config: RolloutConfig, out: Path, data: Path, report: BuildReport,
             workers: int, progress: bool | None, ray: RayOptions | None,
             rules_dir: Path | str | None) -> BuildReport:
-    """The three stages, under the build folder's lock."""
+    """The three stages, under the build folder's lock; the first two again for each grow."""
+    from sc2data.pairs.draw import NotEnoughStates
+    from sc2data.pairs.pairset import make_pairset
+
+    for rounds in range(GROW_ROUNDS + 1):
+        _data(recipe, config, data, report, workers, progress, ray, rules_dir)
+        t = time.perf_counter()
+        try:
+            pairs = make_pairset(recipe, data, out / PAIRS_DIR, progress=progress)
+        except NotEnoughStates as e:
+            report.add("pair", t)
+            episodes = grow_to(e, config.episodes, recipe.rollout.episodes, rounds)
+            report.lines.append(f"pair: {e.shortfall}; growing the data to {episodes} episodes")
+            config = replace(config, episodes=episodes)
+            continue
+        report.add("pair", t)
+        report.lines.append(pairs.table())
+        return report
+    raise AssertionError("grow_to ends the build after GROW_ROUNDS rounds")
+
+
+def _data(recipe: Recipe, config: RolloutConfig, data: Path, report: BuildReport, workers: int,
+          progress: bool | None, ray: RayOptions | None, rules_dir: Path | str | None) -> None:
+    """Roll out and label ``config``'s data (on one Ray instance or cluster with ``ray``)."""
     from sc2data.data.rollout import check_folder, rollout
     from sc2data.labels.label import label_dataset
-    from sc2data.pairs.pairset import make_pairset
 
     with contextlib.ExitStack() as stack:
         if ray is not None:
@@ -107,8 +167,9 @@ def _stages(recipe: Recipe, config: RolloutConfig, out: Path, data: Path, report
         else:
             r, retries = rollout_on_ray(config, data, ray, progress=progress)
             report.lines += retries.lines() if retries.tasks else []
-        report.seconds["rollout"] = time.perf_counter() - t
-        report.lines.append(f"rollout: {r.episodes} episodes, {r.steps:,} stacks "
+        report.add("rollout", t)
+        grew = f", grown from {r.grew_from}" if r.grew_from is not None else ""
+        report.lines.append(f"rollout: {r.episodes} episodes{grew}, {r.steps:,} stacks "
                             f"({r.shards_written} shards written, {r.shards_kept} kept)")
 
         t = time.perf_counter()
@@ -119,11 +180,5 @@ def _stages(recipe: Recipe, config: RolloutConfig, out: Path, data: Path, report
             labels, retries = label_on_ray(data, ray, include=list(recipe.rule_ids),
                                            progress=progress, rules_dir=rules_dir)
             report.lines += retries.lines() if retries.tasks else []
-        report.seconds["label"] = time.perf_counter() - t
+        report.add("label", t)
         report.lines.append(labels.table())
-
-    t = time.perf_counter()
-    pairs = make_pairset(recipe, data, out / PAIRS_DIR, progress=progress)
-    report.seconds["pair"] = time.perf_counter() - t
-    report.lines.append(pairs.table())
-    return report

@@ -241,7 +241,8 @@ def render(
 @app.command()
 @with_options(PROGRESS, RAY)
 def rollout(
-    out: Path = typer.Option(..., "--out", help="Dataset folder (created; rerun to resume)."),
+    out: Path = typer.Option(..., "--out", help="Dataset folder (created; rerun to resume, or "
+                                                "with more --episodes to grow it)."),
     env: Optional[str] = typer.Option(None, help="Backend: sim (embedded simulator, default) or "
                                                  "sc2 (the real game)."),
     agent: Optional[str] = typer.Option(None, help="Agent: reduced-random (default), random or "
@@ -256,19 +257,26 @@ def rollout(
     workers: Optional[int] = typer.Option(None, help="Worker processes [default: 1]; with --ray, "
                                                      "tasks at once [default: all CPUs]. The "
                                                      "data does not depend on it."),
-    episodes_per_shard: int = typer.Option(8, help="Episodes per shard file."),
+    episodes_per_shard: Optional[int] = typer.Option(None, help="Episodes per shard file "
+                                                                "[default: 8]."),
     max_steps: Optional[int] = typer.Option(None, help="Cut episodes after this many steps."),
     progress: Optional[bool] = None,
     ray: Optional[RayArgs] = None,
 ) -> None:
-    """Play episodes and store every 2-frame stack in sharded, checksummed HDF5."""
-    from sc2data.data.rollout import RolloutConfig
+    """Play episodes and store every 2-frame stack in sharded, checksummed HDF5.
+
+    Into a dataset folder, the settings not given are the folder's: `--out DATA --episodes N`
+    grows DATA to N episodes (or finishes an interrupted run)."""
+    from dataclasses import replace
+
+    from sc2data.data.rollout import RolloutConfig, folder_config
     from sc2data.data.rollout import rollout as run
     from sc2data.errors import Sc2DataError
 
     given = {k: v for k, v in {"env": env, "agent": agent, "episodes": episodes, "seed": seed,
                                "layers": layers}.items() if v is not None}
-    extra = {"episodes_per_shard": episodes_per_shard, "max_steps": max_steps}
+    extra = {k: v for k, v in {"episodes_per_shard": episodes_per_shard,
+                               "max_steps": max_steps}.items() if v is not None}
     if recipe is not None:
         from sc2data.recipe import load
 
@@ -277,7 +285,8 @@ def rollout(
                                f"recipe instead")
         config = RolloutConfig.from_recipe(load(recipe), **extra)
     else:
-        config = RolloutConfig(**given, **extra)
+        base = folder_config(out)
+        config = replace(base, **given, **extra) if base else RolloutConfig(**given, **extra)
     lines: list[str] = []
     options = ray.options(workers) if ray else None
     if options is not None:
@@ -287,7 +296,8 @@ def rollout(
         lines = report.lines() if report.tasks else []
     else:
         s = run(config, out, workers=1 if workers is None else workers, progress=progress)
-    typer.echo(f"{s.out}: {s.episodes} episodes, {s.steps:,} stacks in {s.seconds:.1f} s "
+    grew = f", grown from {s.grew_from}" if s.grew_from is not None else ""
+    typer.echo(f"{s.out}: {s.episodes} episodes{grew}, {s.steps:,} stacks in {s.seconds:.1f} s "
                f"({s.shards_written} shards written, {s.shards_kept} kept)")
     for line in lines:
         typer.echo(line)

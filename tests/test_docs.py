@@ -30,6 +30,7 @@ SKIP = re.compile(r"^<!--\s*skip-test:\s*(.+?)\s*-->$")
 
 SUBSTITUTIONS: list[tuple[str, str]] = [
     ("--episodes 20 --workers 2", "--episodes 3 --workers 2"),
+    ("--out data/rr --episodes 24", "--out data/rr --episodes 4"),
     ("pair manifests/smoke.toml", "pair manifests/tiny.toml"),
     ("sc2data build manifests/buildmarines-paper.toml --out data/paper",
      "sc2data build manifests/tiny.toml --out demo-out/data"),

@@ -23,6 +23,7 @@ from sc2data.data.dataset import (
     manifest_schema,
     read_index,
     read_manifest,
+    shard_settings,
 )
 from sc2data.data.shards import CHUNK_INDEX, EPISODE_COLUMNS, Shard, chunk_table
 from sc2data.errors import Sc2DataError
@@ -124,7 +125,11 @@ def _check_shard(path: Path, rows: dict[str, Any], manifest: dict[str, Any],
     try:
         if shard.schema.to_dict() != manifest["schema"]:
             faults.append(f"{path.name}: schema differs from {MANIFEST}")
-        if shard.attrs.get("settings") != manifest["settings"]:
+        version = manifest.get("format_version")
+        if shard.attrs.get("format_version") != version:
+            faults.append(f"{path.name}: shard format {shard.attrs.get('format_version')} in a "
+                          f"dataset of format {version}")
+        elif shard.attrs.get("settings") != shard_settings(manifest["settings"], version):
             faults.append(f"{path.name}: settings differ from {MANIFEST}")
         if rows["shard_sha256"] and any(h != digest for h in rows["shard_sha256"]):
             faults.append(f"{path.name}: sha256 {digest[:12]}… does not match the index")

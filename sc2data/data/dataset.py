@@ -46,6 +46,12 @@ def shard_name(i: int) -> str:
     return f"shard-{i:05d}.h5"
 
 
+def shard_settings(settings: dict[str, Any], version: int = DATASET.version) -> dict[str, Any]:
+    """What each shard of a dataset of format ``version`` records of its settings: all of them
+    but, from format 3 on, the episode count (a shard does not depend on how many follow it)."""
+    return {k: v for k, v in settings.items() if version < 3 or k != "episodes"}
+
+
 def write_manifest(folder: Path, manifest: dict[str, Any]) -> None:
     text = json.dumps(manifest, indent=2, sort_keys=True) + "\n"
     write_atomic(folder / MANIFEST, text.encode())

@@ -6,6 +6,12 @@ shards as ``*.h5.partial`` and rename them when complete and fsynced (:mod:`sc2d
 the parent shows one progress bar fed by the workers, and writes ``index.parquet`` last.
 Rerunning the same command after an interruption (Ctrl-C, ``kill -9``) deletes stale partials,
 keeps the complete shards and finishes the rest; other settings in the same folder are refused.
+
+A dataset grows: more ``episodes`` with the same other settings adds the missing episodes (the
+last shard of the smaller run, if partial, is rolled out again from its episodes' seeds), and the
+folder ends byte for byte as a fresh run of that many episodes would leave it, since no shard
+records the episode count. Fewer episodes than the folder holds are refused: a dataset only
+grows.
 """
 
 from __future__ import annotations
@@ -33,6 +39,7 @@ from sc2data.data.dataset import (
     read_index,
     read_manifest,
     shard_name,
+    shard_settings,
     write_index,
     write_manifest,
 )
@@ -110,6 +117,15 @@ class RolloutConfig(RolloutSpec):
         spec = {f.name: getattr(recipe.rollout, f.name) for f in fields(RolloutSpec)}
         return cls(**{**spec, "seed": recipe.seed, "recipe": recipe.name, **overrides})
 
+    @classmethod
+    def from_settings(cls, settings: dict[str, Any]) -> RolloutConfig:
+        """The config whose :meth:`settings` are ``settings`` (a ``dataset.json``'s)."""
+        try:
+            return cls(**{**{k: settings[k] for k in _SETTINGS_ORDER},
+                          "codec": Codec.from_dict(settings["codec"])})
+        except (KeyError, TypeError, ValueError) as e:
+            raise Sc2DataError(f"unreadable rollout settings ({e!r})") from None
+
     @property
     def schema(self) -> Schema:
         return Schema.named(self.layers)
@@ -177,8 +193,8 @@ def play_episode(env: environment.Base, agent: base_agent.BaseAgent, writer: Sha
 
 def shard_attrs(config: RolloutConfig, i: int) -> dict[str, Any]:
     span = config.shard_episodes(i)
-    return {"settings": config.settings(), "versions": versions(), "backend": config.env,
-            "map": MAP_NAME, "agent": config.agent, "seed": config.seed,
+    return {"settings": shard_settings(config.settings()), "versions": versions(),
+            "backend": config.env, "map": MAP_NAME, "agent": config.agent, "seed": config.seed,
             "layers": config.layers, "recipe": config.recipe or "",
             "episode_start": span.start, "episode_stop": span.stop}
 
@@ -243,16 +259,36 @@ def _differences(a: dict[str, Any], b: dict[str, Any]) -> list[str]:
     return sorted(k for k in set(a) | set(b) if a.get(k) != b.get(k))
 
 
+def folder_config(out: Path) -> RolloutConfig | None:
+    """The settings of the dataset in ``out``, if it holds a readable one: what a rollout into it
+    takes for the settings it is not given."""
+    try:
+        return RolloutConfig.from_settings(read_manifest(out)["settings"])
+    except (Sc2DataError, KeyError, TypeError):
+        return None
+
+
 def check_folder(config: RolloutConfig, out: Path) -> None:
-    """Refuse a file, a foreign folder, or a dataset made with other settings."""
+    """Refuse a file, a foreign folder, a dataset of an older format or made with other
+    settings, or fewer episodes than the folder holds (or is growing to)."""
     if out.exists() and not out.is_dir():
         raise Sc2DataError(f"output {out} exists and is not a folder; choose another --out")
     if out.is_dir() and (out / MANIFEST).exists():
         old = read_manifest(out)
-        diff = _differences(old.get("settings", {}), config.settings())
+        if old["format_version"] != DATASET.version:
+            raise Sc2DataError(f"{out} has dataset format {old['format_version']}, which this "
+                               f"sc2data reads and verifies but does not add to (it writes "
+                               f"format {DATASET.version}); roll out into a new --out")
+        settings = old.get("settings", {})
+        diff = [k for k in _differences(settings, config.settings()) if k != "episodes"]
         if diff:
             raise Sc2DataError(f"{out} holds a dataset made with other settings (differs in: "
                                f"{', '.join(diff)}); use another --out or delete it")
+        if settings.get("episodes", 0) > config.episodes:
+            raise Sc2DataError(f"{out} holds {settings['episodes']} episodes (or is growing to "
+                               f"them), more than the {config.episodes} asked for; a dataset "
+                               f"only grows: ask for {settings['episodes']} or more, or use "
+                               f"another --out")
     elif out.is_dir() and any(p.name != LOCK and not p.name.endswith(PARTIAL)
                               for p in out.iterdir()):  # our own debris is not foreign
         raise Sc2DataError(f"output folder {out} is not empty and is not an sc2data dataset; "
@@ -274,25 +310,29 @@ def create_folder(out: Path) -> None:
         raise Sc2DataError(f"cannot write to output folder {out}: {e.strerror or e}") from None
 
 
-def prepare_folder(config: RolloutConfig, out: Path) -> list[int]:
-    """Write the manifest if new; drop stale partials; check complete shards; return the rest."""
+def prepare_folder(config: RolloutConfig, out: Path) -> tuple[list[int], int | None]:
+    """Check the complete shards, then write the manifest (if new or growing) and drop stale
+    partials; return the shards to write and, when a finished dataset grows, its episodes.
+
+    Everything is checked before anything changes, so a refusal leaves the folder as it was. A
+    grow removes the index first: until the new one is written the folder is an unfinished
+    rollout, which the same command finishes, to the same bytes, after any interruption.
+    """
     check_folder(config, out)  # again, under the lock
-    if not (out / MANIFEST).exists():
+    had = read_manifest(out)["settings"]["episodes"] if (out / MANIFEST).exists() else None
+    recorded = _recorded_hashes(out)
+    todo = [i for i in range(config.n_shards) if not (out / shard_name(i)).exists() or
+            not check_kept(config, out / shard_name(i), i, recorded.get(shard_name(i)))]
+    grew = had is not None and had < config.episodes and (out / INDEX).exists()
+    if had != config.episodes:
+        (out / INDEX).unlink(missing_ok=True)
         write_manifest(out, manifest_for(config))
     for stale in out.glob(f"*{PARTIAL}"):
         if stale.is_dir():  # an attempt folder of a Ray task (sc2data.scaleout.driver)
             shutil.rmtree(stale)
         else:
             stale.unlink()
-    recorded = _recorded_hashes(out)
-    todo = []
-    for i in range(config.n_shards):
-        path = out / shard_name(i)
-        if not path.exists():
-            todo.append(i)
-            continue
-        check_kept(config, path, i, recorded.get(path.name))
-    return todo
+    return todo, had if grew else None
 
 
 def _recorded_hashes(out: Path) -> dict[str, str]:
@@ -304,10 +344,12 @@ def _recorded_hashes(out: Path) -> dict[str, str]:
     return dict(zip(index.column("shard").to_pylist(), index.column("shard_sha256").to_pylist()))
 
 
-def check_kept(config: RolloutConfig, path: Path, i: int, recorded_sha256: str | None) -> None:
-    """A shard a resumed rollout keeps must be the one it wrote: shard ``i``'s episodes with
-    these settings, and the bytes the index recorded (or, for a shard the index does not list
-    yet, intact throughout: every chunk read through its checksum). Never the other way round:
+def check_kept(config: RolloutConfig, path: Path, i: int, recorded_sha256: str | None) -> bool:
+    """Whether a resumed rollout keeps complete shard ``path``: True for shard ``i`` as this
+    rollout writes it (its episodes, these settings, and the bytes the index recorded or, for a
+    shard the index does not list yet, intact throughout: every chunk read through its
+    checksum); False for shard ``i`` of a smaller dataset (the same first episode, fewer of
+    them), which a grow rolls out again; an error for anything else. Never the other way round:
     what is on disk is not taken as the new truth."""
     def refuse(why: str) -> Sc2DataError:
         return Sc2DataError(f"{path} {why}; delete it and rerun to roll it out again")
@@ -321,8 +363,10 @@ def check_kept(config: RolloutConfig, path: Path, i: int, recorded_sha256: str |
     finally:
         shard.close()
     span = config.shard_episodes(i)
-    if attrs["settings"] != config.settings():
+    if attrs["settings"] != shard_settings(config.settings()):
         raise refuse("was written with other settings")
+    if attrs["episode_start"] == span.start and span.start < attrs["episode_stop"] < span.stop:
+        return False  # outgrown
     if (attrs["episode_start"], attrs["episode_stop"]) != (span.start, span.stop):
         raise refuse(f"holds episodes {attrs['episode_start']}–{attrs['episode_stop']}, not "
                      f"{span.start}–{span.stop} (a shard copied over another?)")
@@ -330,10 +374,11 @@ def check_kept(config: RolloutConfig, path: Path, i: int, recorded_sha256: str |
         if sha256_file(path) != recorded_sha256:
             raise refuse(f"does not match the sha256 {INDEX} recorded when it was written "
                          f"(damaged or replaced)")
-        return
+        return True
     faults = check_shard(path, manifest_for(config))
     if faults:
         raise refuse(f"is damaged ({faults[0]})")
+    return True
 
 
 def _fail_fast(config: RolloutConfig, env_factory: EnvFactory,
@@ -358,6 +403,8 @@ class RolloutSummary:
     episodes: int
     steps: int
     seconds: float
+    grew_from: int | None = None
+    """The episodes of the finished dataset this call grew (None: it did not grow one)."""
 
 
 def rollout(config: RolloutConfig, out: str | os.PathLike[str], workers: int = 1,
@@ -394,7 +441,7 @@ def rollout(config: RolloutConfig, out: str | os.PathLike[str], workers: int = 1
             shutil.rmtree(out, ignore_errors=True)
         raise
     with FolderLock(out, "rollout") as lock:
-        todo = prepare_folder(config, out)
+        todo, grew_from = prepare_folder(config, out)
         lock.share()
         per_episode = config.max_steps or EPISODE_STEPS
         total = sum(len(config.shard_episodes(i)) for i in todo) * per_episode
@@ -412,4 +459,5 @@ def rollout(config: RolloutConfig, out: str | os.PathLike[str], workers: int = 1
                 for row in written.get(i) or index_rows(out / shard_name(i))]
         write_index(out, rows)
     return RolloutSummary(out, len(todo), config.n_shards - len(todo), len(rows),
-                          sum(r["n_steps"] for r in rows), time.perf_counter() - started)
+                          sum(r["n_steps"] for r in rows), time.perf_counter() - started,
+                          grew_from)

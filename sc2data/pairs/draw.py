@@ -42,10 +42,20 @@ PAIR_SCHEMA = pa.schema([
 """Columns of pairs.parquet before packing adds ``state`` (see docs/pairset.md)."""
 P_CANONICAL = 0.5
 """Share of training pairs (of a command with training phrasings) that keep the canonical text."""
+MARGIN = 1.25
+"""More data than the observed yield says a shortage asks for: new episodes yield more or less
+than the old, and the episodes are split again."""
 
 
 class NotEnoughStates(Sc2DataError):
     """The labelled data holds too few positives (or nulls) for the recipe's quotas."""
+
+    def __init__(self, shortfall: str, hint: str, episodes: int | None) -> None:
+        super().__init__(f"{shortfall}; {hint}")
+        self.shortfall = shortfall
+        """What was found against what the recipe asks for."""
+        self.episodes = episodes
+        """Episodes in all that should meet the quotas (None: more data cannot help)."""
 
 
 @dataclass(frozen=True)
@@ -66,9 +76,6 @@ def _assign_episodes(episodes: np.ndarray, fractions: Sequence[float],
                      rng: np.random.Generator) -> dict[int, int]:
     """Map each episode to a split index, shuffled, in proportion to the fractions."""
     unique = np.unique(episodes)
-    if len(unique) < len(fractions):
-        raise NotEnoughStates(f"an episode-disjoint split needs at least {len(fractions)} "
-                              f"episodes; the data has {len(unique)}: roll out more episodes")
     counts = apportion(len(unique), fractions)
     for i, c in enumerate(counts):  # every split gets at least one episode
         if c == 0:
@@ -89,6 +96,9 @@ def build_pairs(recipe: Recipe, data: Labelled) -> pa.Table:
     fractions = recipe.split.fractions
     is_null = ~fires.any(axis=1)
 
+    n_episodes = len(np.unique(episode))
+    if recipe.split.method == "episode" and n_episodes < len(fractions):
+        raise _too_few_episodes(recipe, fires, is_null, n_episodes)
     if recipe.split.method == "episode":
         split_map = _assign_episodes(episode, fractions, rng)
         split_of = np.fromiter((split_map[int(e)] for e in episode), np.int64, len(episode))
@@ -104,7 +114,17 @@ def build_pairs(recipe: Recipe, data: Labelled) -> pa.Table:
     # A state that satisfies every command has no possible mismatch: it is never drawn.
     used = fires.all(axis=1)
     chosen: list[tuple[int, np.ndarray, np.ndarray]] = []  # (pool, state idx, command idx)
-    shortages: list[tuple[str, int, int, float]] = []
+    filled: dict[str, list[int]] = {}  # what → [states usable, states the recipe asks for]
+    unmet: list[tuple[str, int, int]] = []  # (what, found, need) of each quota not met
+
+    def short(what: str, found: int, need: int) -> bool:
+        f = filled.setdefault(what, [0, 0])
+        f[0] += min(found, need)
+        f[1] += need
+        if found < need:
+            unmet.append((what, found, need))
+        return found < need
+
     for pool in pools:
         in_pool = split_of == pool
         # Rarest command first, so a stack satisfying two commands serves the scarcer one.
@@ -112,23 +132,18 @@ def build_pairs(recipe: Recipe, data: Labelled) -> pa.Table:
         for c in rarity:
             need = int(quotas[pool][c])
             cand = np.flatnonzero(fires[:, c] & in_pool & ~used)
-            if len(cand) < need:
-                shortages.append(_shortage(commands[c].id, pool, recipe, len(cand), need,
-                                           fires[:, c].sum(), episode))
+            if short(commands[c].id, len(cand), need):
                 continue
             pick = np.sort(rng.choice(cand, size=need, replace=False))
             used[pick] = True
             chosen.append((pool, pick, np.full(need, c)))
         need = null_quota[pool]
         cand = np.flatnonzero(is_null & in_pool)
-        if len(cand) < need:
-            shortages.append(_shortage("null", pool, recipe, len(cand), need, is_null.sum(),
-                                       episode))
-        else:
+        if not short("null", len(cand), need):
             chosen.append((pool, np.sort(rng.choice(cand, size=need, replace=False)),
                            np.full(need, -1)))
-    if shortages:
-        raise NotEnoughStates(_shortage_message(shortages, len(np.unique(episode))))
+    if unmet:
+        raise _shortage(recipe, fires, is_null, filled, unmet, n_episodes)
 
     columns: dict[str, list[np.ndarray]] = {k: [] for k in ("pool", "idx", "cmd", "target",
                                                              "kind", "label")}
@@ -202,26 +217,56 @@ def _draw_mismatch(fires: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return keys.argmax(axis=1)
 
 
-def _shortage(what: str, pool: int, recipe: Recipe, found: int, need: int, total: int,
-              episode: np.ndarray) -> tuple[str, int, int, float]:
-    """(what, found, need, estimated extra episodes) for one quota that cannot be met."""
-    per_episode = total / max(len(np.unique(episode)), 1)
-    if recipe.split.method == "episode":
-        per_episode *= recipe.split.fractions[pool]  # a new episode lands in this split so often
-    more = (need - found) / per_episode if per_episode > 0 else float("inf")
-    return what, found, need, more
+def _available(recipe: Recipe, fires: np.ndarray, is_null: np.ndarray) -> dict[str, int]:
+    """States each command (and ``null``) could be drawn from in the whole data."""
+    drawable = fires & ~fires.all(axis=1)[:, None]  # no mismatch possible: never drawn
+    counts = {c.id: int(drawable[:, j].sum()) for j, c in enumerate(recipe.commands)}
+    return {**counts, "null": int(is_null.sum())}
 
 
-def _shortage_message(shortages: list[tuple[str, int, int, float]], n_episodes: int) -> str:
-    """One line: what was found against what the recipe needs, and how much more to roll out."""
-    found: dict[str, list[int]] = {}
-    for what, f, n, _ in shortages:
-        found.setdefault(what, [0, 0])
-        found[what][0] += f
-        found[what][1] += n
-    more = max(m for *_, m in shortages)
-    hint = (f"roll out about {int(np.ceil(more))} more episodes (the data has {n_episodes})"
-            if np.isfinite(more) else "some command never fires in the data; check the agent "
-            "and the rule")
-    parts = ", ".join(f"{w} {f} of {n} needed" for w, (f, n) in found.items())
-    return f"too few labelled states for the recipe: {parts}; {hint}"
+def _episodes(n: int) -> str:
+    return f"{n} episode{'' if n == 1 else 's'}"
+
+
+def _never(what: str) -> str:
+    return "no state is null" if what == "null" else f"{what} never fires"
+
+
+def _too_few_episodes(recipe: Recipe, fires: np.ndarray, is_null: np.ndarray, n_episodes: int
+                      ) -> NotEnoughStates:
+    """The error of too few episodes for an episode split, asking for the episodes whose yield,
+    at this data's rate per episode, meets every quota with :data:`MARGIN` to spare."""
+    k = len(recipe.split.fractions)
+    shortfall = (f"an episode-disjoint split needs at least {_episodes(k)}; the data has "
+                 f"{n_episodes}")
+    asks = {c.id: recipe.pairs.states_per_command for c in recipe.commands}
+    asks["null"] = recipe.pairs.null_states
+    have = _available(recipe, fires, is_null)
+    never = [w for w, n in asks.items() if n and have[w] == 0]
+    if never:
+        return NotEnoughStates(shortfall, f"{', '.join(map(_never, never))} in the data; check "
+                               f"the agent and the rule", None)
+    ratio = max([n / have[w] for w, n in asks.items() if n] or [0.0])
+    want = max(k, int(np.ceil(n_episodes * ratio * MARGIN)))
+    return NotEnoughStates(shortfall, f"roll out {want} episodes in all", want)
+
+
+def _shortage(recipe: Recipe, fires: np.ndarray, is_null: np.ndarray,
+              filled: dict[str, list[int]], unmet: list[tuple[str, int, int]], n_episodes: int
+              ) -> NotEnoughStates:
+    """The one-line error of unmet quotas: each short one's usable states against the recipe's
+    total, and how many episodes in all should meet them: the data scaled by the worst ratio of
+    need to found of any unmet quota (of the whole data's, where a split found none), with
+    :data:`MARGIN`."""
+    order = [*(c.id for c in recipe.commands), "null"]  # the recipe's order
+    parts = ", ".join(f"{w} {filled[w][0]} of {filled[w][1]} the recipe asks for" for w in order
+                      if w in filled and filled[w][0] < filled[w][1])
+    shortfall = f"too few labelled states for the recipe: {parts} (in {_episodes(n_episodes)})"
+    have = _available(recipe, fires, is_null)
+    never = [w for w, (f, n) in filled.items() if f < n and have[w] == 0]
+    if never:
+        return NotEnoughStates(shortfall, f"{', '.join(map(_never, never))} in the data; check "
+                               f"the agent and the rule", None)
+    ratio = max(need / found if found else filled[w][1] / have[w] for w, found, need in unmet)
+    episodes = max(n_episodes + 1, int(np.ceil(n_episodes * ratio * MARGIN)))
+    return NotEnoughStates(shortfall, f"roll out {episodes} episodes in all", episodes)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import shlex
 import shutil
 import time
 from dataclasses import dataclass
@@ -24,7 +25,7 @@ from sc2data.data.dataset import Dataset
 from sc2data.errors import Sc2DataError
 from sc2data.files import PARTIAL, FolderLock, check_out, fsync_path, publish, sha256_files
 from sc2data.formats import PAIRSET
-from sc2data.pairs.draw import Labelled, build_pairs
+from sc2data.pairs.draw import Labelled, NotEnoughStates, build_pairs
 from sc2data.pairs.layout import (
     META_FILE,
     PACKED_DIR,
@@ -110,6 +111,25 @@ def labelled_stacks(recipe: Recipe, data: Path) -> tuple[Labelled, dict[str, Any
     data_labelled = Labelled(t["episode"].to_numpy().astype(np.int64),
                              t["step"].to_numpy().astype(np.int32), fires.astype(bool))
     return data_labelled, labels.meta
+
+
+def grow_command(data: Path, episodes: int, rules: list[dict[str, Any]]) -> str:
+    """The shell command that grows dataset ``data`` to ``episodes`` episodes (its other
+    settings are the folder's) and labels it again with the same ``rules``."""
+    from sc2data.labels.registry import load_registry
+
+    q = shlex.quote(str(data))
+    dirs = sorted({str(Path(r["source"][len("file "):]).parent) for r in rules
+                   if str(r.get("source", "")).startswith("file ")})
+    options = f" --rules-dir {shlex.quote(dirs[0])}" if dirs else ""
+    ids = [r["id"] for r in rules]
+    try:
+        default = load_registry(dirs[0] if dirs else None).ids
+    except Sc2DataError:
+        default = []
+    if sorted(default) != sorted(ids):
+        options += f" --rules {','.join(ids)}"
+    return f"sc2data rollout --out {q} --episodes {episodes} && sc2data label {q}{options}"
 
 
 def _identity(recipe: Recipe, labels_meta: dict[str, Any]) -> dict[str, Any]:
@@ -205,7 +225,13 @@ def _make(recipe: Recipe, data: Path, out: Path, labelled: Labelled,
     if out.exists() and any(out.iterdir()):
         raise Sc2DataError(f"{out} already holds something other than this recipe's pair set; "
                            f"choose another --out or delete it")
-    pairs = build_pairs(recipe, labelled)
+    try:
+        pairs = build_pairs(recipe, labelled)
+    except NotEnoughStates as e:
+        if e.episodes is None:
+            raise
+        command = grow_command(data, e.episodes, labels_meta.get("rules", []))
+        raise NotEnoughStates(e.shortfall, f"grow the data: {command}", e.episodes) from None
     ds = open_dataset(data)
     tmp = out.with_name(f".{out.name}{PARTIAL}")
     shutil.rmtree(tmp, ignore_errors=True)

@@ -132,15 +132,15 @@ def test_folder_of_an_older_format(copy: Path, capsys: pytest.CaptureFixture[str
                  ["rollout", "--out", copy, "--env", "sim", "--agent", "random", "--episodes",
                   "3", "--seed", "7", "--episodes-per-shard", "2"]):
         code, _, err = cli(args, capsys)
-        assert_one_line_error(code, err, "has dataset format 1, not 2; regenerate it")
+        assert_one_line_error(code, err, "has dataset format 1, not 3; regenerate it")
     assert {p.name: p.read_bytes() for p in copy.iterdir()} == before
     (copy / "dataset.json").write_text(json.dumps(manifest))
     with h5py.File(copy / "shard-00001.h5", "r+") as f:
         f.attrs["format_version"] = 1
     code, _, err = cli(["info", copy], capsys)
-    assert_one_line_error(code, err, "shard-00001.h5 has shard format 1, not 2; regenerate it")
+    assert_one_line_error(code, err, "shard-00001.h5 has shard format 1, not 3; regenerate it")
     code, _, err = cli(["verify", copy], capsys)
-    assert code == 1 and "shard-00001.h5 has shard format 1, not 2" in err
+    assert code == 1 and "shard-00001.h5 has shard format 1, not 3" in err
 
 
 def test_truncated_and_non_hdf5_shards(copy: Path, capsys: pytest.CaptureFixture[str]) -> None:

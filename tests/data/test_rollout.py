@@ -68,8 +68,9 @@ def test_other_settings_in_the_same_folder_are_refused(tmp_path: Path) -> None:
     out = tmp_path / "out"
     make_dataset(out)
     before = sorted((p.name, p.stat().st_mtime_ns) for p in out.iterdir())
-    with pytest.raises(Sc2DataError, match=r"other settings \(differs in: episodes\)"):
-        make_dataset(out, episodes=6)
+    with pytest.raises(Sc2DataError, match=r"other settings \(differs in: "
+                                           r"episodes_per_shard\)"):
+        make_dataset(out, episodes=6, per_shard=3)  # more episodes alone would grow it
     with pytest.raises(Sc2DataError, match="seed"):
         make_dataset(out, seed=1)
     assert sorted((p.name, p.stat().st_mtime_ns) for p in out.iterdir()) == before

@@ -235,7 +235,7 @@ def test_shard_of_an_older_format_is_refused(tmp_path: Path) -> None:
     write_shard(path)
     with h5py.File(path, "r+") as f:
         f.attrs["format_version"] = 1
-    with pytest.raises(Sc2DataError, match="has shard format 1, not 2; regenerate it"):
+    with pytest.raises(Sc2DataError, match="has shard format 1, not 3; regenerate it"):
         Shard(path)
 
 

@@ -299,6 +299,24 @@ def test_cli_label_a_dataset(data: Path, capsys: pytest.CaptureFixture[str]) -> 
     assert exit_code("verify", str(data)) == 0  # the dataset is untouched by its labels
 
 
+def test_labels_after_a_grow_are_a_fresh_runs(data: Path, tmp_path: Path,
+                                              capsys: pytest.CaptureFixture[str]) -> None:
+    """Labelled, grown by an episode (its partial last shard rolled out again), labelled again:
+    the labels of a dataset rolled out at that size at once, fingerprint included."""
+    assert exit_code("label", str(data), "--no-progress") == 0
+    assert exit_code("rollout", "--out", str(data), "--episodes", "4", "--no-progress") == 0
+    assert exit_code("label", str(data), "--no-progress") == 0
+    assert "up to date" not in capsys.readouterr().out
+    fresh = tmp_path / "fresh"
+    assert exit_code("rollout", "--out", str(fresh), "--episodes", "4", "--max-steps", "150",
+                     "--episodes-per-shard", "2", "--seed", "3", "--no-progress") == 0
+    assert exit_code("label", str(fresh), "--no-progress") == 0
+    grown, again = read_labels(data), read_labels(fresh)
+    assert grown.stacks.equals(again.stacks) and grown.fired.equals(again.fired)
+    assert grown.stacks.num_rows == 600
+    assert grown.meta["fingerprint"] == again.meta["fingerprint"]
+
+
 def test_cli_label_selects_rules(data: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert exit_code("label", str(data), "--no-progress", "--rules", "build_scv,train_marine",
                    "--exclude", "train_marine") == 0

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from sc2data.pairs.draw import Labelled, NotEnoughStates, apportion, build_pairs
+from sc2data.pairs.draw import MARGIN, Labelled, NotEnoughStates, apportion, build_pairs
 from sc2data.recipe import parse
 from tests.test_recipe import BASE
 
@@ -88,17 +88,53 @@ def test_same_seed_same_pairs_other_seed_other_pairs() -> None:
     assert not a.equals(build_pairs(parse(d), data))
 
 
-def test_too_few_positives_says_how_many_and_how_much_more() -> None:
-    r = recipe(pairs__states_per_command=500)
+def test_too_few_positives_says_how_many_of_the_recipes_total_and_how_much_data() -> None:
+    """The shortage names each short command's usable states against the recipe's total (not a
+    split's share), and the episodes in all that should meet it: the data scaled by the worst
+    need-to-found ratio, with the margin."""
+    r = recipe(pairs__states_per_command=100, split__method="random")
+    data = labelled()
+    with pytest.raises(NotEnoughStates) as e:
+        build_pairs(r, data)
+    drawable = data.fires & ~data.fires.all(axis=1)[:, None]
+    marines = int(drawable[:, 1].sum())
+    assert marines < 100 <= drawable[:, 0].sum()
+    episodes = int(np.ceil(12 * 100 / marines * MARGIN))
+    assert str(e.value) == (f"too few labelled states for the recipe: train_marine {marines} of "
+                            f"100 the recipe asks for (in 12 episodes); roll out {episodes} "
+                            f"episodes in all")
+    assert e.value.episodes == episodes
+
+
+@pytest.mark.parametrize("method", ["episode", "random"])
+def test_the_episodes_a_shortage_asks_for_are_enough(method: str) -> None:
+    r = recipe(pairs__states_per_command=150, pairs__null_states=2000, split__method=method)
     with pytest.raises(NotEnoughStates) as e:
         build_pairs(r, labelled())
     msg = str(e.value)
-    assert "of 500 needed" in msg and "more episodes" in msg and "\n" not in msg
+    assert "of 150 the recipe asks for" in msg and "of 2000" not in msg and "\n" not in msg
+    assert e.value.episodes is not None and e.value.episodes > 12
+    build_pairs(r, labelled(episodes=e.value.episodes))  # the same yield, that many episodes
+
+
+def test_a_command_that_never_fires_cannot_be_grown_into() -> None:
+    data = labelled()
+    data.fires[:, 1] = False
+    with pytest.raises(NotEnoughStates) as e:
+        build_pairs(recipe(), data)
+    assert e.value.episodes is None
+    assert str(e.value).endswith("train_marine 0 of 10 the recipe asks for (in 12 episodes); "
+                                 "train_marine never fires in the data; check the agent and the "
+                                 "rule")
 
 
 def test_episode_split_needs_three_episodes() -> None:
-    with pytest.raises(NotEnoughStates, match="at least 3 episodes"):
+    with pytest.raises(NotEnoughStates, match="at least 3 episodes") as e:
         build_pairs(recipe(), labelled(episodes=2, steps=2000))
+    assert e.value.episodes == 3
+    with pytest.raises(NotEnoughStates) as e:
+        build_pairs(recipe(pairs__states_per_command=400), labelled(episodes=2, steps=2000))
+    assert e.value.episodes is not None and e.value.episodes > 3  # sized by the yield
 
 
 # --- training phrasings

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import os
+import re
 import shutil
 import subprocess
 import sys
@@ -17,6 +19,7 @@ from sc2data.data.dataset import open_dataset
 from sc2data.errors import Sc2DataError
 from sc2data.pairs.packed import PackedSplit
 from sc2data.vocab import SPLITS
+from tests.cli import assert_one_line_error, exit_code, run_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 SC2DATA = [sys.executable, "-m", "sc2data.cli"]
@@ -120,6 +123,58 @@ def test_pair_errors_are_one_line(built: Path, tmp_path: Path, changes: dict[str
     assert message in p.stderr
     assert p.stderr.count("\n") == 1 and "Traceback" not in p.stderr
     assert not (tmp_path / "x").exists() and not (tmp_path / ".x.partial").exists()
+
+
+GROW_RECIPE = """
+name = "grow"
+seed = 0
+
+[rollout]
+env = "sim"
+agent = "reduced-random"
+episodes = 3
+layers = "paper"
+
+[commands.build_scv]
+text = "build an SCV"
+
+[commands.build_supply_depot]
+text = "build a supply depot"
+
+[pairs]
+states_per_command = 12
+null_states = 40
+
+[split]
+method = "episode"
+train = 0.6
+val = 0.2
+test = 0.2
+"""
+
+
+def test_a_shortage_gives_the_command_that_grows_the_data_enough(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Too few states: one line with the recipe's totals and a runnable command; once it has run,
+    pair succeeds."""
+    data, recipe = tmp_path / "data", tmp_path / "grow.toml"
+    recipe.write_text(GROW_RECIPE)
+    assert exit_code("rollout", "--out", data, "--episodes", "3", "--episodes-per-shard", "2",
+                     "--max-steps", "200", "--no-progress") == 0
+    assert exit_code("label", data, "--no-progress") == 0
+    code, _, err = run_cli(["pair", recipe, "--data", data, "--out", tmp_path / "p"], capsys)
+    assert_one_line_error(code, err, "grow the data: ")
+    assert re.search(r": build_scv \d+ of 12 the recipe asks for, build_supply_depot \d+ of 12 "
+                     r"the recipe asks for \(in 3 episodes\); grow the data: ", err)
+    command = err.strip().split("; grow the data: ")[1]
+    assert command == (f"sc2data rollout --out {data} --episodes "
+                       f"{int(command.split()[5])} && sc2data label {data}")
+    bin_dir = Path(sys.executable).parent
+    subprocess.run(command, shell=True, check=True, cwd=ROOT, capture_output=True,
+                   env={**os.environ, "PATH": f"{bin_dir}{os.pathsep}{os.environ['PATH']}"})
+    code, out, err = run_cli(["pair", recipe, "--data", data, "--out", tmp_path / "p",
+                              "--no-progress"], capsys)
+    assert code == 0 and "pair set written" in out, err
 
 
 def test_pair_refuses_unlabelled_data_and_foreign_output(built: Path, tmp_path: Path) -> None:

@@ -295,6 +295,26 @@ def _format_phrasings(p: dict[str, Any] | None, pct: Any) -> list[str]:
     return lines
 
 
+SEPARATED = 0.5
+"""Below this share of command states lying nearest their own command, the t-SNE picture says
+that the model has not separated the commands (whatever clusters t-SNE draws)."""
+
+
+def separation_note(states: np.ndarray, labels: np.ndarray, commands: np.ndarray,
+                    ids: Sequence[str]) -> str | None:
+    """A warning for the picture when, in the embedding space itself, fewer than
+    :data:`SEPARATED` of the labelled states lie nearest their own command's embedding."""
+    own = labels != ""
+    if not own.any() or len(ids) < 2:
+        return None
+    nearest = np.asarray(ids)[pairwise(states[own], commands).argmin(1)]
+    share = float((nearest == labels[own]).mean())
+    if share >= SEPARATED:
+        return None
+    return (f"this model has not separated the commands: {share:.0%} of the command states lie "
+            f"nearest their own command (chance {1 / len(ids):.0%})")
+
+
 def tsne(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None,
          out: str | os.PathLike[str] | None = None, states: int = 2000, seed: int = 0,
          texts: Sequence[str] = (), device: str = "auto", allow_unfinished: bool = False) -> Path:
@@ -326,6 +346,7 @@ def tsne(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None
     for t in texts:  # "PHRASE=command_id" is coloured as its command; a bare phrase in black
         marks.append((*parse_text_option(t, ids), "extra") if "=" in t else (t, "", "extra"))
     text_e = scorer.embed_texts([m[0] for m in marks])
+    warning = separation_note(emb, labels, text_e[:len(ids)], ids)
     xy = _tsne(np.concatenate([emb, text_e]), seed)
     s_xy, t_xy = xy[:len(emb)], xy[len(emb):]
 
@@ -358,6 +379,10 @@ def tsne(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None
     ax.legend(loc="best", fontsize=8, markerscale=1.5)
     ax.set_title(f"MEM embedding space, t-SNE of {len(emb)} {split} states and "
                  f"{len(marks)} commands ({run.name})")
+    if warning:
+        ax.text(0.5, 0.98, warning, transform=ax.transAxes, ha="center", va="top", fontsize=11,
+                color="darkred", zorder=7,
+                bbox={"boxstyle": "round", "facecolor": "white", "edgecolor": "darkred"})
     ax.set_xticks([])
     ax.set_yticks([])
     path = Path(out) if out else run / "tsne.png"

@@ -165,3 +165,18 @@ def test_evaluate_refuses_another_pair_set_unless_asked(run: Path, tmp_path: Pat
     assert len(written) == 1 and f"wrote {written[0]}" in out
     after = (run / "eval.json").read_bytes() if (run / "eval.json").exists() else None
     assert after == before
+
+
+def test_tsne_says_when_a_model_has_separated_nothing() -> None:
+    from sc2data.model.evaluate import separation_note
+
+    ids = ["a", "b", "c"]
+    commands = np.eye(3, dtype=np.float32)
+    labels = np.array(["a", "b", "c", "", "a", "b"])
+    apart = commands[[0, 1, 2, 0, 0, 1]] + 0.01  # each state at its own command
+    assert separation_note(apart, labels, commands, ids) is None
+    mixed = commands[[1, 2, 0, 0, 1, 2]]  # every command state at another command
+    note = separation_note(mixed, labels, commands, ids)
+    assert note is not None and "has not separated" in note and "0% of" in note
+    assert "chance 33%" in note
+    assert separation_note(mixed, np.array([""] * 6), commands, ids) is None  # null states only

@@ -93,6 +93,17 @@ def check_rollout(recipe: Recipe, settings: dict[str, Any], data: Path) -> None:
                            f"build the recipe's own data with sc2data build")
 
 
+def check_current(labels_meta: dict[str, Any], data: Path) -> None:
+    """The labels are of the data the folder holds now, not of what it held before it grew (or
+    was rolled out again): pairs drawn from them would miss the new episodes."""
+    from sc2data.labels.source import dataset_source
+
+    if labels_meta.get("dataset", {}).get("fingerprint") != \
+            dataset_source(data).info["fingerprint"]:
+        raise Sc2DataError(f"the labels in {data} are of other data than it holds now (it grew, "
+                           f"or was rolled out again); relabel it: sc2data label {data}")
+
+
 def labelled_stacks(recipe: Recipe, data: Path) -> tuple[Labelled, dict[str, Any]]:
     """Every stack of ``data`` with the recipe's rules' verdicts, from ``sc2data label``'s files."""
     from sc2data.labels.store import read_labels
@@ -106,6 +117,7 @@ def labelled_stacks(recipe: Recipe, data: Path) -> tuple[Labelled, dict[str, Any
                            f"{','.join(recipe.rule_ids)}")
     check_texts(recipe, {r["id"]: r["command"] for r in labels.meta["rules"]})
     check_rollout(recipe, labels.meta.get("dataset", {}).get("settings", {}), data)
+    check_current(labels.meta, data)
     t = labels.stacks
     fires = np.stack([t[c.id].to_numpy(zero_copy_only=False) for c in recipe.commands], axis=1)
     data_labelled = Labelled(t["episode"].to_numpy().astype(np.int64),

@@ -156,7 +156,7 @@ test = 0.2
 def test_a_shortage_gives_the_command_that_grows_the_data_enough(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Too few states: one line with the recipe's totals and a runnable command; once it has run,
-    pair succeeds."""
+    pair succeeds (and not from labels of the data before it grew)."""
     data, recipe = tmp_path / "data", tmp_path / "grow.toml"
     recipe.write_text(GROW_RECIPE)
     assert exit_code("rollout", "--out", data, "--episodes", "3", "--episodes-per-shard", "2",
@@ -169,9 +169,12 @@ def test_a_shortage_gives_the_command_that_grows_the_data_enough(
     command = err.strip().split("; grow the data: ")[1]
     assert command == (f"sc2data rollout --out {data} --episodes "
                        f"{int(command.split()[5])} && sc2data label {data}")
-    bin_dir = Path(sys.executable).parent
-    subprocess.run(command, shell=True, check=True, cwd=ROOT, capture_output=True,
-                   env={**os.environ, "PATH": f"{bin_dir}{os.pathsep}{os.environ['PATH']}"})
+    grow, relabel = command.split(" && ")
+    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}"}
+    subprocess.run(grow, shell=True, check=True, cwd=ROOT, capture_output=True, env=env)
+    code, _, err = run_cli(["pair", recipe, "--data", data, "--out", tmp_path / "p"], capsys)
+    assert_one_line_error(code, err, "are of other data than it holds now (it grew")
+    subprocess.run(relabel, shell=True, check=True, cwd=ROOT, capture_output=True, env=env)
     code, out, err = run_cli(["pair", recipe, "--data", data, "--out", tmp_path / "p",
                               "--no-progress"], capsys)
     assert code == 0 and "pair set written" in out, err

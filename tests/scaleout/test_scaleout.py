@@ -143,6 +143,22 @@ def test_a_worker_killed_mid_episode_is_retried_and_the_data_equals_a_local_run(
     assert_same_data(out, reference)
 
 
+def test_a_dataset_grown_on_ray_equals_a_local_run(ray_instance: Any, tmp_path: Path) -> None:
+    """2 → 4 episodes as Ray tasks, its partial shard rolled out again: a local 4-episode run's
+    bytes, every file."""
+    from dataclasses import replace
+
+    from tests.data.test_grow import sums
+
+    config = replace(CONFIG, episodes_per_shard=3)
+    out = tmp_path / "ray"
+    rollout_on_ray(replace(config, episodes=2), out, RayOptions(), progress=False)
+    summary, _ = rollout_on_ray(config, out, RayOptions(), progress=False)
+    assert (summary.grew_from, summary.shards_written, summary.shards_kept) == (2, 2, 0)
+    rollout(config, tmp_path / "local", progress=False)
+    assert sums(out) == sums(tmp_path / "local")
+
+
 @pytest.mark.slow
 def test_a_hung_task_is_cancelled_and_run_again(ray_instance: Any, reference: Path,
                                                 tmp_path: Path) -> None:

@@ -395,7 +395,8 @@ def read_state(run: Path) -> dict[str, Any] | None:
     try:
         state = json.loads(path.read_text())
         if not isinstance(state, dict) or not isinstance(state.get("sha256"), dict) or \
-                not isinstance(state.get("finished"), bool):
+                not isinstance(state.get("finished"), bool) or \
+                type(state.get("epochs_done")) is not int:
             raise ValueError("not a run state")
     except (OSError, ValueError) as e:
         raise Sc2DataError(f"{path} is unreadable ({e}); train again with --overwrite") from None

@@ -2,9 +2,9 @@
 
 SB3's default ``CombinedExtractor`` would flatten every 64×64 layer into one MLP input (80k
 inputs with the paper's layers). Instead each layer is scaled to [0, 1] by its pysc2 scale,
-screen and minimap layers go through their own two-layer strided CNN (64 → 16 → 8 pixels), and the
-non-spatial vectors through ``log1p`` and a linear layer; the three are concatenated and mapped
-to ``features_dim``.
+screen and minimap layers go through their own two-layer strided CNN (64 → 16 → 8 pixels), and
+the non-spatial vectors through ``log1p`` and a linear layer; the three are concatenated and
+mapped to ``features_dim``.
 """
 
 from __future__ import annotations

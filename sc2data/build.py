@@ -26,7 +26,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from sc2data.errors import Sc2DataError
+from sc2data.errors import Sc2DataError, reason
 from sc2data.files import LOCK, FolderLock, check_out
 from sc2data.recipe import MAX_EPISODES, Recipe
 
@@ -96,7 +96,7 @@ def build(recipe: Recipe, out: str | os.PathLike[str], *, workers: int = 1,
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
-        raise Sc2DataError(f"cannot create {out}: {e.strerror or e}; choose another --out") \
+        raise Sc2DataError(f"cannot create {out}: {reason(e)}; choose another --out") \
             from None
     try:
         with FolderLock(out, "build"):

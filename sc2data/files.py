@@ -14,6 +14,7 @@ Every writer in sc2data goes through this module:
 from __future__ import annotations
 
 import contextlib
+import errno
 import fcntl
 import hashlib
 import os
@@ -21,7 +22,7 @@ import time
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
-from sc2data.errors import Sc2DataError
+from sc2data.errors import Sc2DataError, reason
 
 PARTIAL = ".partial"
 """Suffix of a file or folder still being written; never a complete result."""
@@ -61,6 +62,22 @@ def atomic_file(path: Path) -> Iterator[Path]:
         publish(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)
+
+
+FULL = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS)
+"""The errors of a write that the disk refused: full, over quota or read-only."""
+
+
+@contextlib.contextmanager
+def writing(what: str, remedy: str) -> Iterator[None]:
+    """Turn a write the disk refuses (:data:`FULL`) inside the block into one line about
+    ``what``; other errors pass as they are."""
+    try:
+        yield
+    except OSError as e:
+        if e.errno not in FULL:
+            raise
+        raise Sc2DataError(f"cannot write {what}: {reason(e)}; {remedy}") from None
 
 
 def write_atomic(path: Path, data: bytes) -> None:

@@ -14,10 +14,13 @@ apart by their files, described (``sc2data info``) and checked (``sc2data verify
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from sc2data.errors import Sc2DataError
+from sc2data.formats import Shape, check_record
 
 
 def kind(folder: Path) -> str:
@@ -104,13 +107,31 @@ def _pairset_info(folder: Path) -> list[str]:
     return lines
 
 
+METRICS_ROW: Shape = {k: int if k == "epoch" else float for k in
+                      ("epoch", "train_loss", "train_acc", "val_loss", "val_acc")}
+"""A row of a run's ``metrics.jsonl``, as ``info`` reads it."""
+EVAL_SHAPE: Shape = {"splits?": {"*": {"accuracy?": (float, type(None))}}}
+"""A run's ``eval.json``, as ``info`` reads it."""
+
+
+def _records(path: Path, shape: Shape, lines: bool = False) -> list[Any]:
+    """A run's JSON file (or its JSON lines), checked to have ``shape``; [] if it is absent."""
+    if not path.is_file():
+        return []
+    try:
+        text = path.read_text()
+        records = [json.loads(t) for t in text.splitlines()] if lines else [json.loads(text)]
+    except (OSError, ValueError) as e:
+        raise Sc2DataError(f"{path} is unreadable ({e}); train the run again") from None
+    for r in records:
+        check_record(r, shape, path, "train the run again")
+    return records
+
+
 def _run_info(folder: Path) -> list[str]:
-    import json
+    from sc2data.model.train import read_config, read_state
 
-    from sc2data.model.train import read_state
-
-    config = json.loads((folder / "config.json").read_text()) if \
-        (folder / "config.json").is_file() else {}
+    config = read_config(folder) or {}
     state = read_state(folder)
     done = "no state.json" if state is None else (
         f"{state['epochs_done']} of {state['epochs']} epochs"
@@ -119,8 +140,7 @@ def _run_info(folder: Path) -> list[str]:
              "settings  " + "  ".join(f"{k}={config.get(k)}" for k in
                                       ("epochs", "batch_size", "lr", "l2", "seed",
                                        "categorical", "pool", "device_used"))]
-    rows = [json.loads(line) for line in (folder / "metrics.jsonl").open()] if \
-        (folder / "metrics.jsonl").is_file() else []
+    rows = _records(folder / "metrics.jsonl", METRICS_ROW, lines=True)
     if rows:
         best = min(rows, key=lambda r: r["val_loss"])
         lines += ["", f"{'epoch':>5} {'train loss':>10} {'train acc':>9} {'val loss':>9} "
@@ -128,8 +148,7 @@ def _run_info(folder: Path) -> list[str]:
         lines += [f"{r['epoch']:>5} {r['train_loss']:>10.4f} {r['train_acc']:>9.2%} "
                   f"{r['val_loss']:>9.4f} {r['val_acc']:>8.2%}" + ("  *" if r is best else "")
                   for r in rows]
-    if (folder / "eval.json").is_file():
-        ev = json.loads((folder / "eval.json").read_text())
+    for ev in _records(folder / "eval.json", EVAL_SHAPE):
         acc = {s: v.get("accuracy") for s, v in ev.get("splits", {}).items()}
         lines += ["", "eval      " + "  ".join(f"{s} {a:.2%}" for s, a in acc.items()
                                                if isinstance(a, float))]
@@ -148,7 +167,10 @@ def _dataset(folder: Path) -> tuple[list[str], list[str]]:
     from sc2data.data.audit import verify
     from sc2data.labels.store import LABELS_FILE, read_labels
 
-    faults = verify(folder)
+    try:
+        faults = verify(folder)
+    except Sc2DataError as e:  # its record or index unreadable: nothing more can be checked
+        return [str(e)], []
     if not (folder / LABELS_FILE).exists():
         return faults, ["no labels yet (sc2data label)"]
     return faults + _faults_of(lambda: read_labels(folder)), ["labels checked"]

@@ -6,6 +6,10 @@ one written by another version. The ids are spelled as they have been stored sin
 first version (existing datasets, pair sets and checkpoints must keep reading), so the older
 hyphenated ids of shards and datasets stay; formats added later use the dotted form
 ``sc2data.NAME``.
+
+A record's header says whose it is; its *shape* (:data:`Shape`: which fields, of which JSON
+types) says it can be read: :func:`check_record` turns valid JSON of the wrong shape (``[]``,
+``null``, a field of the wrong type) into the same one-line error, before any reader looks inside.
 """
 
 from __future__ import annotations
@@ -15,6 +19,54 @@ from dataclasses import dataclass
 from typing import Any
 
 from sc2data.errors import Sc2DataError
+from sc2data.vocab import SPLITS
+
+Shape = type | tuple[type, ...] | dict[str, "Shape"] | list["Shape"]
+"""What a JSON record must look like: a type or a tuple of types (``int`` never takes a bool,
+``float`` takes an int), ``[S]`` a list of S, ``{key: S}`` an object holding those keys (more are
+allowed; ``"key?"`` may be absent; ``"*"`` is every value of the object)."""
+
+_WORDS = {dict: "an object", list: "a list", str: "a string", int: "an integer",
+          float: "a number", bool: "true or false", type(None): "null"}
+
+
+def _word(value: Any) -> str:
+    return next((w for t, w in _WORDS.items() if type(value) is t), type(value).__name__)
+
+
+def shape_fault(value: Any, shape: Shape, at: str = "") -> str | None:
+    """Where ``value`` departs from ``shape``, in words (None if it fits)."""
+    where = f"{at} is" if at else "it holds"
+    if isinstance(shape, dict):
+        if not isinstance(value, dict):
+            return f"{where} {_word(value)}, not an object"
+        for key, sub in shape.items():
+            name = key.rstrip("?")
+            items = value.items() if name == "*" else [(name, value[name])] if name in value \
+                else []
+            if not items and name != "*" and not key.endswith("?"):
+                return f"{at or 'it'} lacks the field {name!r}"
+            for k, v in items:
+                fault = shape_fault(v, sub, f"{at}.{k}" if at else str(k))
+                if fault:
+                    return fault
+        return None
+    if isinstance(shape, list):
+        if not isinstance(value, list):
+            return f"{where} {_word(value)}, not a list"
+        faults = (shape_fault(v, shape[0], f"{at}[{i}]") for i, v in enumerate(value))
+        return next((f for f in faults if f), None)
+    types = shape if isinstance(shape, tuple) else (shape,)
+    fits = type(value) in types or (type(value) is int and float in types)
+    return None if fits else f"{where} {_word(value)}, not " + " or ".join(
+        _WORDS.get(t, t.__name__) for t in types)
+
+
+def check_record(value: Any, shape: Shape, where: object, remedy: str) -> None:
+    """One-line error unless ``value`` (a parsed JSON record read from ``where``) has ``shape``."""
+    fault = shape_fault(value, shape)
+    if fault:
+        raise Sc2DataError(f"{where} is not a record sc2data can read ({fault}); {remedy}")
 
 
 @dataclass(frozen=True)
@@ -28,6 +80,8 @@ class Format:
     remedy: str
     reads: tuple[int, ...] = ()
     """Older versions still read (and verified), never written into."""
+    shape: Shape | None = None
+    """What a record of this format holds beyond its header (JSON records only)."""
 
     def header(self) -> dict[str, Any]:
         """The two fields that open every record of this format."""
@@ -43,6 +97,8 @@ class Format:
         if version != self.version and version not in self.reads:
             raise Sc2DataError(f"{where} has {self.kind} format {version}, not {self.version}; "
                                f"{self.remedy}")
+        if self.shape is not None:
+            check_record(found, self.shape, where, self.remedy)
         return int(version)
 
 
@@ -50,9 +106,21 @@ SHARD = Format("sc2data-shard", 3, "shard", "regenerate it with this sc2data", r
 """2: frames in blocks (one HDF5 dataset per group and dtype). 3: its ``settings`` attribute
 leaves out the dataset's episode count, so a shard's bytes do not depend on how many episodes
 follow it and a dataset grows without rewriting its full shards."""
-DATASET = Format("sc2data-dataset", 3, "dataset", "regenerate it with this sc2data", reads=(2,))
+DATASET = Format("sc2data-dataset", 3, "dataset", "regenerate it with this sc2data", reads=(2,),
+                 shape={"schema": dict,  # its own shape: sc2data.schema
+                        "settings": {"episodes?": (int, type(None))},  # the codec: data.dataset
+                        "versions?": dict})
 """``dataset.json``; dataset format V holds shards of format V (2 and 3). A dataset of an
 older format still read is readable and verifiable, but a rollout does not add to it."""
 PACKED = Format("sc2data.packed", 1, "packed split", "rerun sc2data pair")
-PAIRSET = Format("sc2data.pairset", 1, "pair set", "rerun sc2data pair")
+PAIRSET = Format("sc2data.pairset", 1, "pair set", "rerun sc2data pair", shape={
+    "schema": dict,
+    "commands": [{"id": str, "text": str, "paraphrases?": [str], "train_paraphrases?": [str]}],
+    "fingerprint": str,
+    "splits": {s: {"states": int} for s in SPLITS},
+    "counts?": {"*": {"*": int}},
+    "recipe_name?": str, "seed?": int, "recipe?": {"split?": {"method?": str}},
+    "identity?": dict, "labels?": {"rules?": [dict]}, "versions?": dict,
+})
+"""``pairset.json`` (``docs/pairset.md``)."""
 CHECKPOINT = Format("sc2data.mem", 1, "model checkpoint", "retrain the model")

@@ -20,6 +20,7 @@ from typing import Any, Literal
 import numpy as np
 
 from sc2data._pysc2 import features
+from sc2data.formats import shape_fault
 from sc2data.vocab import MINIMAP_SIZE, SCREEN_SIZE
 
 SCHEMA_VERSION = 1
@@ -234,11 +235,15 @@ class Schema:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> Schema:
-        """Inverse of :meth:`to_dict`; refuses another schema version."""
-        version = d.get("version")
-        if version != SCHEMA_VERSION:
+        """Inverse of :meth:`to_dict`; refuses another schema version, or another shape."""
+        fault = shape_fault(d, {})
+        version = None if fault else d.get("version")
+        if not fault and version != SCHEMA_VERSION:
             raise SchemaError(f"schema version {version} is not the supported version "
                               f"{SCHEMA_VERSION}; regenerate the data with this sc2data")
+        fault = fault or shape_fault(d, {"screen": [str], "minimap": [str], "vectors": dict})
+        if fault:
+            raise SchemaError(f"the schema is not one sc2data wrote ({fault})")
         schema = cls.from_names(d["screen"], d["minimap"])
         if d.get("vectors") != {v.name: list(v.fields) for v in schema.vectors}:
             raise SchemaError("the stored non-spatial vectors differ from this pysc2's")

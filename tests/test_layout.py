@@ -14,7 +14,7 @@ from pathlib import Path
 PACKAGE = Path(__file__).resolve().parents[1] / "sc2data"
 LEVELS = {"game": 1, "data": 2, "labels": 3, "pairs": 4, "model": 5, "rl": 6, "scaleout": 6,
           "testing": 6}
-TOP = {"cli", "cliopts", "build", "folders", "__init__"}
+TOP = {"cli", "commands", "cliopts", "build", "folders", "__init__"}
 """Root modules that sit above every stage: the CLI and its option helpers, the build driver, the
 folder inspector (info/verify of any folder) and the lazy public API; everything else at the root
 is shared ground."""

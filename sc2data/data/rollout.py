@@ -44,8 +44,8 @@ from sc2data.data.dataset import (
     write_manifest,
 )
 from sc2data.data.shards import Shard, ShardWriter
-from sc2data.errors import Sc2DataError
-from sc2data.files import LOCK, PARTIAL, FolderLock, publish, sha256_file
+from sc2data.errors import Sc2DataError, reason
+from sc2data.files import LOCK, PARTIAL, FolderLock, publish, sha256_file, writing
 from sc2data.formats import DATASET
 from sc2data.game import env as envs
 from sc2data.progress import Bar
@@ -307,7 +307,7 @@ def create_folder(out: Path) -> None:
         if made and out.is_dir():
             with contextlib.suppress(OSError):
                 out.rmdir()
-        raise Sc2DataError(f"cannot write to output folder {out}: {e.strerror or e}") from None
+        raise Sc2DataError(f"cannot write to output folder {out}: {reason(e)}") from None
 
 
 def prepare_folder(config: RolloutConfig, out: Path) -> tuple[list[int], int | None]:
@@ -440,7 +440,8 @@ def rollout(config: RolloutConfig, out: str | os.PathLike[str], workers: int = 1
         if made:
             shutil.rmtree(out, ignore_errors=True)
         raise
-    with FolderLock(out, "rollout") as lock:
+    with FolderLock(out, "rollout") as lock, writing(f"the dataset {out}", "free some space, "
+                                                    "then rerun the same command to resume"):
         todo, grew_from = prepare_folder(config, out)
         lock.share()
         per_episode = config.max_steps or EPISODE_STEPS

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from sc2data._pysc2 import buffs, features, units
-from sc2data.errors import Sc2DataError
+from sc2data.errors import Sc2DataError, reason
 from sc2data.files import write_atomic
 from sc2data.schema import StackBatch
 
@@ -220,7 +220,7 @@ def _save(fig: Any, agg: Any, path: Path) -> Path:
         path.parent.mkdir(parents=True, exist_ok=True)
         write_atomic(path, buf.getvalue())
     except OSError as e:
-        raise Sc2DataError(f"cannot write the PNG to {path}: {e.strerror or e}; "
+        raise Sc2DataError(f"cannot write the PNG to {path}: {reason(e)}; "
                            "choose a writable --out path") from e
     return path
 

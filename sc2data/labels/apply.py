@@ -92,8 +92,14 @@ def long_form(wide: pa.Table, rules: Sequence[Registered]) -> pa.Table:
 
 def fingerprint(rules: Sequence[Registered], info: dict[str, Any]) -> str:
     """Same rules (id, version, code) on the same dataset ⇒ same fingerprint ⇒ resumable."""
-    doc = {"format": FORMAT_VERSION, "dataset": info.get("fingerprint", info),
-           "rules": [(e.id, e.rule.version, e.code_sha256) for e in rules]}
+    return labels_fingerprint(info.get("fingerprint", info),
+                              [(e.id, e.rule.version, e.code_sha256) for e in rules])
+
+
+def labels_fingerprint(dataset: Any, rules: Sequence[tuple[Any, ...]]) -> str:
+    """:func:`fingerprint` from the dataset's fingerprint and (id, version, code sha256) per
+    rule, as a label record lists them."""
+    doc = {"format": FORMAT_VERSION, "dataset": dataset, "rules": [list(r) for r in rules]}
     return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()
 
 
@@ -102,6 +108,17 @@ def write_part(unit: Unit, rules: Sequence[Registered], keys: Sequence[str], bat
     """Label one unit and write its part atomically at ``path``."""
     write_table(label_batches(unit.batches(batch_size, keys), rules, on_batch=on_batch), path)
     write_sums(part_sums(path), [path])
+
+
+def parts_run(state: Path) -> str | None:
+    """The fingerprint of the run a parts folder belongs to (its ``state.json``); None if it has
+    none sc2data can read, so its parts are not resumed."""
+    try:
+        record = json.loads(state.read_text())
+    except (OSError, ValueError):
+        return None
+    run = record.get("fingerprint") if isinstance(record, dict) else None
+    return run if isinstance(run, str) else None
 
 
 def part_sums(part: Path) -> Path:

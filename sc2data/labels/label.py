@@ -22,7 +22,7 @@ from typing import Any
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from sc2data.errors import Sc2DataError
+from sc2data.errors import Sc2DataError, reason
 from sc2data.files import FolderLock, write_atomic
 from sc2data.labels.apply import (
     check_requirements,
@@ -31,6 +31,7 @@ from sc2data.labels.apply import (
     long_form,
     null_multi,
     part_sums,
+    parts_run,
     pc_sum,
     required_keys,
     write_part,
@@ -120,7 +121,7 @@ def label(source: Source, rules: Sequence[Registered], out_dir: Path | str, *,
         with FolderLock(out, "label"):
             return _run(source, rules, out, fp, batch_size, progress, run_units)
     except OSError as e:
-        raise Sc2DataError(f"cannot write labels in {out}: {e.strerror or e}; check the folder "
+        raise Sc2DataError(f"cannot write labels in {out}: {reason(e)}; check the folder "
                            f"is writable and has space") from e
 
 
@@ -132,8 +133,7 @@ def _run(source: Source, rules: Sequence[Registered], out: Path, fp: str, batch_
     keys = required_keys(rules, source.schema)
     parts = out / PARTS_DIR
     state = parts / "state.json"
-    if parts.is_dir() and (not state.is_file() or json.loads(state.read_text()).get(
-            "fingerprint") != fp):
+    if parts.is_dir() and parts_run(state) != fp:
         shutil.rmtree(parts)  # parts of other rules or another dataset: not resumable
     parts.mkdir(parents=True, exist_ok=True)
     if not state.is_file():

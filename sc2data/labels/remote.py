@@ -5,7 +5,6 @@ worker processes (:class:`LocalUnits`, ``--workers K``) or in Ray tasks (through
 from __future__ import annotations
 
 import functools
-import json
 import socket
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -13,7 +12,7 @@ from pathlib import Path
 
 from sc2data.errors import Sc2DataError
 from sc2data.files import PARTIAL
-from sc2data.labels.apply import fingerprint, write_part
+from sc2data.labels.apply import fingerprint, parts_run, write_part
 from sc2data.labels.registry import Registered
 from sc2data.labels.source import Source, Unit, dataset_source
 from sc2data.progress import Bar
@@ -40,7 +39,7 @@ def label_unit(data: str, selection: Selection, unit_key: str, part: str,
     ``selection`` = (include, exclude, rules_dir) and checked to be the run's (its parts
     folder's ``state.json``), then the unit is written with :func:`write_part`."""
     include, exclude, rules_dir = selection
-    run = str(json.loads((Path(part).parent / "state.json").read_text()).get("fingerprint"))
+    run = str(parts_run(Path(part).parent / "state.json"))
     rules, source = _rules_and_source(data, (None if include is None else tuple(include),
                                              tuple(exclude), rules_dir), run)
     if fingerprint(rules, source.info) != run:

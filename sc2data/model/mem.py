@@ -33,6 +33,7 @@ torch is an optional dependency (extra ``train``); this module imports it, so im
 
 from __future__ import annotations
 
+import io
 import os
 from collections.abc import Iterable, Mapping
 from dataclasses import asdict, dataclass
@@ -42,7 +43,7 @@ from typing import Any, Literal
 import numpy as np
 
 from sc2data.errors import MissingDependencyError, Sc2DataError
-from sc2data.files import atomic_file
+from sc2data.files import write_atomic
 from sc2data.formats import CHECKPOINT
 from sc2data.schema import Schema, SchemaError, StackBatch
 
@@ -454,8 +455,15 @@ def save_checkpoint(path: str | os.PathLike[str], model: MEM, words: tuple[str, 
             "tables": model.tables, "words": list(words),
             "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()},
             **extra}
-    with atomic_file(path) as tmp:
-        torch.save(blob, tmp)
+    save_atomic(blob, path)
+
+
+def save_atomic(obj: Any, path: Path) -> None:
+    """``torch.save`` ``obj`` to ``path`` atomically. It is serialised in memory first: torch's
+    writer turns a full disk into an opaque RuntimeError, a plain write into ENOSPC."""
+    buf = io.BytesIO()
+    torch.save(obj, buf)
+    write_atomic(path, buf.getvalue())
 
 
 def load_checkpoint(path: str | os.PathLike[str], device: str | torch.device = "cpu"

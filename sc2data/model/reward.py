@@ -15,7 +15,6 @@ package (extra ``text``).
 
 from __future__ import annotations
 
-import json
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -159,7 +158,8 @@ def load_model(run: str | os.PathLike[str], device: str = "cpu", fast: bool = Tr
         path = path / "best.pt"
     dev = resolve_device(device)
     model, meta = load_checkpoint(path, dev)
-    config = path.with_name("config.json")
-    if "config" not in meta and config.is_file():
-        meta["config"] = json.loads(config.read_text())
+    if "config" not in meta and (path.parent / "config.json").is_file():
+        from sc2data.model.train import read_config
+
+        meta["config"] = read_config(path.parent)
     return MEMScorer(model, meta, dev, fast)

@@ -37,9 +37,18 @@ from typing import Any
 
 import numpy as np
 
-from sc2data.errors import MissingDependencyError, Sc2DataError
-from sc2data.files import (LOCK, FolderLock, atomic_file, check_out, publish, sha256_file,
-                           write_atomic)
+from sc2data.errors import MissingDependencyError, Sc2DataError, reason
+from sc2data.files import (
+    LOCK,
+    PARTIAL,
+    FolderLock,
+    check_out,
+    publish,
+    sha256_file,
+    write_atomic,
+    writing,
+)
+from sc2data.formats import Shape, check_record
 from sc2data.model.words import load_word_vectors
 from sc2data.pairs.loader import PairLoader, PairSet
 from sc2data.provenance import versions
@@ -174,7 +183,8 @@ def train(cfg: TrainConfig) -> Path:
     # --- model: input channels and categorical tables from the data's schema
     train_split, val_split = data.packed("train"), data.packed("val")
     run = _make_run_folder(Path(cfg.out or Path("runs") / cfg.name))
-    with FolderLock(run, "train"):
+    with FolderLock(run, "train"), writing(f"the run {run}", "free some space, then rerun the "
+                                                            "same command to resume"):
         resumed = _prepare_run(run, cfg)  # under the lock: another train cannot be writing
         mcfg = M.ModelConfig(categorical=cfg.categorical, pool=cfg.pool,  # type: ignore[arg-type]
                              conv=M.conv_for(cfg.pool),
@@ -292,12 +302,11 @@ def train(cfg: TrainConfig) -> Path:
                 log.write(json.dumps(row) + "\n")
                 log.flush()
                 os.fsync(log.fileno())
-                with atomic_file(run / f"last.pt{NEXT}") as tmp:
-                    torch.save({"epoch": epoch, "best": best, "model": model.state_dict(),
-                                "optimizer": optimizer.state_dict(),
-                                "torch_rng": torch.get_rng_state(),
-                                "numpy_rng": np.random.get_state(),
-                                "python_rng": random.getstate()}, tmp)
+                M.save_atomic({"epoch": epoch, "best": best, "model": model.state_dict(),
+                               "optimizer": optimizer.state_dict(),
+                               "torch_rng": torch.get_rng_state(),
+                               "numpy_rng": np.random.get_state(),
+                               "python_rng": random.getstate()}, run / f"last.pt{NEXT}")
                 _write_state(run, epoch, cfg.epochs)
                 _settle(run, read_state(run))
                 if cfg.progress:
@@ -318,7 +327,7 @@ def _make_run_folder(run: Path) -> Path:
     try:
         run.mkdir(parents=True, exist_ok=True)
     except OSError as e:
-        raise Sc2DataError(f"cannot create run folder {run}: {e.strerror or e}; choose another "
+        raise Sc2DataError(f"cannot create run folder {run}: {reason(e)}; choose another "
                            f"--out") from None
     return run
 
@@ -331,8 +340,13 @@ def _prepare_run(run: Path, cfg: TrainConfig) -> dict[str, Any] | None:
     if not present:
         return None
     state = read_state(run)
+    if state is None and not any((run / c).exists() for c in CHECKPOINTS) and all(
+            p.name in RUN_FILES or p.name.endswith(PARTIAL) for p in present):
+        for p in present:  # stopped before its first epoch ended (a full disk, Ctrl-C): its
+            p.unlink()     # config and any partial checkpoint are all there is; start again
+        return None
     if state is not None and not state["finished"] and not cfg.overwrite:
-        old = json.loads((run / "config.json").read_text())
+        old = read_config(run) or {}
         new = asdict(cfg)
         diff = sorted(k for k in new if k not in RESUME_IGNORES and old.get(k) != new[k])
         if diff:
@@ -387,20 +401,32 @@ def _settle(run: Path, state: dict[str, Any] | None, *, discard: bool = True) ->
             pending.unlink(missing_ok=True)
 
 
+STATE_SHAPE: Shape = {"epochs_done": int, "epochs": int, "finished": bool, "sha256": {"*": str}}
+"""``state.json``: progress, and every run file's sha256."""
+CONFIG_SHAPE: Shape = {"data": str, "epochs": int, "batch_size": int, "lr": float, "l2": float,
+                      "seed": int}
+"""``config.json``: the settings (those every sc2data has written; a resumed run compares all)."""
+
+
+def _read_record(path: Path, shape: Shape) -> dict[str, Any]:
+    try:
+        record = json.loads(path.read_text())
+    except (OSError, ValueError) as e:
+        raise Sc2DataError(f"{path} is unreadable ({e}); train again with --overwrite") from None
+    check_record(record, shape, path, "train again with --overwrite")
+    return record
+
+
 def read_state(run: Path) -> dict[str, Any] | None:
     """``state.json`` of a run folder (None if it has none); one-line error if unreadable."""
     path = run / STATE_FILE
-    if not path.is_file():
-        return None
-    try:
-        state = json.loads(path.read_text())
-        if not isinstance(state, dict) or not isinstance(state.get("sha256"), dict) or \
-                not isinstance(state.get("finished"), bool) or \
-                type(state.get("epochs_done")) is not int:
-            raise ValueError("not a run state")
-    except (OSError, ValueError) as e:
-        raise Sc2DataError(f"{path} is unreadable ({e}); train again with --overwrite") from None
-    return state
+    return _read_record(path, STATE_SHAPE) if path.is_file() else None
+
+
+def read_config(run: Path) -> dict[str, Any] | None:
+    """``config.json`` of a run folder (None if it has none); one-line error if unreadable."""
+    path = run / "config.json"
+    return _read_record(path, CONFIG_SHAPE) if path.is_file() else None
 
 
 def _digest(run: Path, name: str, state: dict[str, Any]) -> str:

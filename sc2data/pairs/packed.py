@@ -9,6 +9,7 @@ same lossless dtypes as the shards; pairs refer to stacks by row (``state`` colu
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 from collections.abc import Iterator, Mapping, Sequence
@@ -35,7 +36,11 @@ def _compression() -> Mapping[str, Any]:
 
 
 class PackedWriter:
-    """Append stacks to a new packed file; the file gets its final name on :meth:`close`."""
+    """Append stacks to a new packed file; the file gets its final name on :meth:`close`.
+
+    It writes with HDF5's chunk cache off (whole chunks go straight to the file), so that a full
+    disk fails the write that hit it; with the cache, the failure surfaced only when the file was
+    closed, and HDF5 then crashed the process while closing it (exit 139)."""
 
     def __init__(self, path: str | os.PathLike[str], schema: Schema, n: int,
                  attrs: Mapping[str, Any] | None = None) -> None:
@@ -44,21 +49,26 @@ class PackedWriter:
         self.schema = schema
         self.n = n
         self.pos = 0
-        self._f = h5py.File(self.partial, "w")
-        self._f.attrs.update(PACKED.header())
-        self._f.attrs["schema"] = json.dumps(schema.to_dict())
-        for k, v in (attrs or {}).items():
-            self._f.attrs[k] = v if isinstance(v, (int, float, str)) else json.dumps(v)
-        for l in schema.layers:
-            s = schema.size(l.group)
-            self._create(l.key, (n, 2, s, s), l.dtype)
-        for v in schema.vectors:
-            self._create(v.name, (n, 2, v.size), v.dtype)
+        self._f = h5py.File(self.partial, "w", rdcc_nbytes=0)
+        self._ds: dict[str, h5py.Dataset] = {}
+        try:
+            self._f.attrs.update(PACKED.header())
+            self._f.attrs["schema"] = json.dumps(schema.to_dict())
+            for k, v in (attrs or {}).items():
+                self._f.attrs[k] = v if isinstance(v, (int, float, str)) else json.dumps(v)
+            for l in schema.layers:
+                s = schema.size(l.group)
+                self._create(l.key, (n, 2, s, s), l.dtype)
+            for v in schema.vectors:
+                self._create(v.name, (n, 2, v.size), v.dtype)
+        except BaseException:
+            self.abort()
+            raise
 
     def _create(self, key: str, shape: tuple[int, ...], dtype: np.dtype) -> None:
         chunks = (min(BLOCK, max(1, shape[0])),) + shape[1:]
-        self._f.create_dataset(key, shape=shape, dtype=dtype, chunks=chunks, fletcher32=True,
-                               **_compression())
+        self._ds[key] = self._f.create_dataset(key, shape=shape, dtype=dtype, chunks=chunks,
+                                               fletcher32=True, **_compression())
 
     def write(self, batch: StackBatch) -> None:
         """Append a batch of stacks (all schema keys present)."""
@@ -66,7 +76,7 @@ class PackedWriter:
         if self.pos + b > self.n:
             raise ValueError(f"packed file {self.path} holds {self.n} stacks; got more")
         for key in self.schema.keys():
-            self._f[key][self.pos:self.pos + b] = batch.arrays[key]
+            self._ds[key][self.pos:self.pos + b] = batch.arrays[key]
         self.pos += b
 
     def close(self) -> Path:
@@ -74,14 +84,24 @@ class PackedWriter:
         if self.pos != self.n:
             self.abort()
             raise ValueError(f"packed file {self.path}: wrote {self.pos} of {self.n} stacks")
-        self._f.close()
+        try:
+            self._ds.clear()
+            self._f.close()
+        except BaseException:
+            self.abort()
+            raise
         publish(self.partial, self.path)
         return self.path
 
     def abort(self) -> None:
-        """Drop the partial file."""
-        if self._f.id.valid:
-            self._f.close()
+        """Drop the partial file. It is emptied first, so that closing it can write what HDF5
+        still holds even on a full disk."""
+        self._ds.clear()
+        with contextlib.suppress(OSError):
+            os.truncate(self.partial, 0)
+        with contextlib.suppress(Exception):
+            if self._f.id.valid:
+                self._f.close()
         self.partial.unlink(missing_ok=True)
 
 

@@ -22,9 +22,18 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from sc2data.data.dataset import Dataset
-from sc2data.errors import Sc2DataError
-from sc2data.files import PARTIAL, FolderLock, check_out, fsync_path, publish, sha256_files
+from sc2data.errors import Sc2DataError, reason
+from sc2data.files import (
+    PARTIAL,
+    FolderLock,
+    check_out,
+    fsync_path,
+    publish,
+    sha256_files,
+    write_atomic,
+)
 from sc2data.formats import PAIRSET
+from sc2data.labels.apply import labels_fingerprint
 from sc2data.pairs.draw import Labelled, NotEnoughStates, build_pairs
 from sc2data.pairs.layout import (
     META_FILE,
@@ -152,15 +161,85 @@ def _identity(recipe: Recipe, labels_meta: dict[str, Any]) -> dict[str, Any]:
     return json.loads(json.dumps(identity))  # as it reads back from pairset.json
 
 
-def _existing(out: Path, identity: dict[str, Any]) -> dict[str, Any] | None:
+def _stored(out: Path) -> dict[str, Any] | str:
+    """``out``'s pair-set record, or why there is none sc2data can read."""
     meta_path = out / META_FILE
     if not meta_path.is_file():
-        return None
+        return f"no {META_FILE}"
     try:
         meta = json.loads(meta_path.read_text())
-    except (OSError, ValueError):
+        PAIRSET.check(meta, meta_path)
+    except (OSError, ValueError, Sc2DataError) as e:
+        return str(e)
+    return meta
+
+
+def _same(meta: dict[str, Any], identity: dict[str, Any]) -> bool:
+    """The record was drawn from this recipe and these labels: only the fields that decide the
+    content count (an earlier sc2data also stored when the labels were made, ``labels_created``)."""
+    stored = meta.get("identity")
+    return isinstance(stored, dict) and {k: stored.get(k) for k in identity} == identity
+
+
+def _other(out: Path, data: Path, recipe: Recipe, identity: dict[str, Any],
+           labels_meta: dict[str, Any]) -> str:
+    """Why ``out`` (not empty) is not the pair set of ``identity``, in words, with what to do."""
+    remedy = "delete it to draw it again, or choose another --out"
+    meta = _stored(out)
+    if isinstance(meta, str):
+        return f"{out} already holds something other than a pair set ({meta}); choose another " \
+               f"--out or delete it"
+    stored = meta.get("identity") if isinstance(meta.get("identity"), dict) else {}
+    old, new = stored.get("recipe"), identity["recipe"]
+    by = f" (written by sc2data {meta.get('versions', {}).get('sc2data', '?')})"
+    if not isinstance(old, dict) or old.get("name") != recipe.name:
+        name = old.get("name") if isinstance(old, dict) else meta.get("recipe_name")
+        return f"{out} holds the pair set of recipe {name!r}, not {recipe.name!r}{by}; {remedy}"
+    if old != new:
+        differ = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
+        return f"{out} holds a pair set of another version of recipe {recipe.name!r} (differs " \
+               f"in: {', '.join(differ)}){by}; {remedy}"
+    code = {r.get("id"): r.get("code_sha256") for r in meta.get("labels", {}).get("rules") or []
+            if isinstance(r, dict)}
+    changed = [r["id"] for r in labels_meta.get("rules", []) if code.get(r["id"], r.get(
+        "code_sha256")) != r.get("code_sha256")]
+    why = f": the code of rule(s) {', '.join(changed)} changed" if changed else ""
+    return f"{out} was drawn for recipe {recipe.name!r} from other labels than {data} holds " \
+           f"now (relabelled since{why}){by}; {remedy}"
+
+
+def _relabelled(out: Path, identity: dict[str, Any], labels_meta: dict[str, Any],
+                pairs: pa.Table) -> dict[str, Any] | None:
+    """``out``'s record, brought up to date, if it is this recipe's pair set drawn from labels
+    that were remade since (another rules' code, e.g. a docstring) on the same shards, and the
+    current labels draw exactly its pairs: the content is the same, so it is kept."""
+    meta = _stored(out)
+    stored = meta.get("identity") if isinstance(meta, dict) else None
+    if not isinstance(meta, dict) or not isinstance(stored, dict) or \
+            stored.get("recipe") != identity["recipe"]:
         return None
-    if not isinstance(meta, dict) or meta.get("identity") != identity:
+    rules = [(r.get("id"), r.get("version"), r.get("code_sha256"))
+             for r in meta.get("labels", {}).get("rules") or [] if isinstance(r, dict)]
+    shards = labels_meta.get("dataset", {}).get("fingerprint")
+    if labels_fingerprint(shards, rules) != stored.get("labels"):
+        return None  # drawn from other shards, or the record does not say
+    try:
+        check_content(out, str(meta["fingerprint"]))
+        drawn = pq.read_table(out / PAIRS_FILE).drop_columns(["state"])
+    except (Sc2DataError, OSError, KeyError, pa.ArrowException):
+        return None
+    if not drawn.equals(pa.concat_tables([pairs.filter(pc.equal(pairs["split"], s))
+                                          for s in SPLITS])):
+        return None
+    meta.update(identity=identity, labels={"fingerprint": labels_meta.get("fingerprint"),
+                                           "rules": labels_meta.get("rules")})
+    write_atomic(out / META_FILE, json.dumps(meta, indent=2, default=str).encode())
+    return meta
+
+
+def _existing(out: Path, identity: dict[str, Any]) -> dict[str, Any] | None:
+    meta = _stored(out)
+    if isinstance(meta, str) or not _same(meta, identity):
         return None
     try:
         check_content(out, str(meta.get("fingerprint")))
@@ -204,22 +283,37 @@ def _pack_split(ds: Dataset, split: str, pairs: pa.Table, path: Path, seed: int,
 def make_pairset(recipe: Recipe, data: str | os.PathLike[str], out: str | os.PathLike[str], *,
                  progress: bool | None = None) -> PairsetSummary:
     """Build the recipe's pair set from the labelled dataset ``data`` into the folder ``out``."""
+    from sc2data.data.dataset import read_manifest
+
     started = time.perf_counter()
     data, out = Path(data), Path(out)
     check_out(out)
+    read_manifest(data)  # the dataset's own record first, then its labels
     labelled, labels_meta = labelled_stacks(recipe, data)
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
     except OSError as e:
-        raise Sc2DataError(f"cannot create {out}: {e.strerror or e}; choose another --out") \
+        raise Sc2DataError(f"cannot create {out}: {reason(e)}; choose another --out") \
             from None
     # The folder is built beside its final name and renamed into place: locked from beside it.
     with FolderLock(out.parent, "pair", name=f".{out.name}.lock", what=out):
         try:
             return _make(recipe, data, out, labelled, labels_meta, started, progress)
         except OSError as e:
-            raise Sc2DataError(f"cannot write the pair set {out}: {e.strerror or e}; check the "
+            raise Sc2DataError(f"cannot write the pair set {out}: {reason(e)}; check the "
                                f"folder is writable and has space") from None
+
+
+def _draw(recipe: Recipe, labelled: Labelled, data: Path, labels_meta: dict[str, Any]
+          ) -> pa.Table:
+    """The recipe's pairs; too few states name the command that grows the data enough."""
+    try:
+        return build_pairs(recipe, labelled)
+    except NotEnoughStates as e:
+        if e.episodes is None:
+            raise
+        command = grow_command(data, e.episodes, labels_meta.get("rules", []))
+        raise NotEnoughStates(e.shortfall, f"grow the data: {command}", e.episodes) from None
 
 
 def _make(recipe: Recipe, data: Path, out: Path, labelled: Labelled,
@@ -230,20 +324,18 @@ def _make(recipe: Recipe, data: Path, out: Path, labelled: Labelled,
 
     identity = _identity(recipe, labels_meta)
     done = _existing(out, identity)
+    if done is None and out.exists() and any(out.iterdir()):
+        try:
+            done = _relabelled(out, identity, labels_meta, build_pairs(recipe, labelled))
+        except NotEnoughStates:  # these labels cannot draw it: not the same pair set
+            done = None
+        if done is None:
+            raise Sc2DataError(_other(out, data, recipe, identity, labels_meta))
     if done is not None:
         return PairsetSummary(out, done["counts"], {s: v["states"] for s, v in
                                                     done["splits"].items()},
                               time.perf_counter() - started, up_to_date=True)
-    if out.exists() and any(out.iterdir()):
-        raise Sc2DataError(f"{out} already holds something other than this recipe's pair set; "
-                           f"choose another --out or delete it")
-    try:
-        pairs = build_pairs(recipe, labelled)
-    except NotEnoughStates as e:
-        if e.episodes is None:
-            raise
-        command = grow_command(data, e.episodes, labels_meta.get("rules", []))
-        raise NotEnoughStates(e.shortfall, f"grow the data: {command}", e.episodes) from None
+    pairs = _draw(recipe, labelled, data, labels_meta)
     ds = open_dataset(data)
     tmp = out.with_name(f".{out.name}{PARTIAL}")
     shutil.rmtree(tmp, ignore_errors=True)

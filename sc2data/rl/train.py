@@ -25,6 +25,7 @@ import dataclasses
 import functools
 import io
 import json
+import typing
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,6 +35,7 @@ import numpy as np
 
 from sc2data.errors import MissingDependencyError, Sc2DataError
 from sc2data.files import write_atomic
+from sc2data.formats import Shape, check_record
 
 EVAL_SEED = 1_000_000
 """First evaluation episode seed (training's seeds stay below it)."""
@@ -84,16 +86,24 @@ class RLConfig:
         return {k: v for k, v in dataclasses.asdict(self).items() if k not in self.RESUMABLE}
 
 
-def check_config(cfg: RLConfig) -> tuple[Any, Any]:
-    """Validate ``cfg`` before anything is written: (narration, scorer) for the narration reward."""
+CONFIG_SHAPE: Shape = {name: typing.get_args(hint) or hint for name, hint in
+                      typing.get_type_hints(RLConfig).items() if name not in RLConfig.RESUMABLE}
+"""``config.json``: :meth:`RLConfig.identity`, every field of its type."""
+STATE_SHAPE: Shape = {"timesteps": int, "env_steps": int, "episodes": int, "resumes": int}
+"""``state.json``: what has been trained so far."""
+
+
+def check_values(cfg: RLConfig) -> None:
+    """One-line error unless every setting of ``cfg`` is one sc2data can run."""
     from sc2data.rl.envs import ACTION_SPACES
     from sc2data.rl.rewards import REWARDS
+    from sc2data.vocab import BACKENDS, LAYER_SETS
 
-    if cfg.action_space not in ACTION_SPACES:
-        raise Sc2DataError(f"unknown action space {cfg.action_space!r}; choose one of: "
-                           f"{', '.join(ACTION_SPACES)}")
-    if cfg.reward not in REWARDS:
-        raise Sc2DataError(f"unknown reward {cfg.reward!r}; choose one of: {', '.join(REWARDS)}")
+    for name, known in (("action_space", ACTION_SPACES), ("reward", REWARDS),
+                        ("layers", LAYER_SETS), ("backend", BACKENDS)):
+        if getattr(cfg, name) not in known:
+            raise Sc2DataError(f"unknown {name.replace('_', ' ')} {getattr(cfg, name)!r}; choose "
+                               f"one of: {', '.join(known)}")
     for name in ("steps", "envs", "rollout", "batch_size", "checkpoint_every"):
         if getattr(cfg, name) < 1:
             raise Sc2DataError(f"--{name.replace('_', '-')} must be at least 1")
@@ -101,6 +111,11 @@ def check_config(cfg: RLConfig) -> tuple[Any, Any]:
         raise Sc2DataError("--episode-steps must be at least 1")
     if not 0 <= cfg.seed < EVAL_SEED - 100_000:
         raise Sc2DataError(f"--seed must lie in [0, {EVAL_SEED - 100_000})")
+
+
+def check_config(cfg: RLConfig) -> tuple[Any, Any]:
+    """Validate ``cfg`` before anything is written: (narration, scorer) for the narration reward."""
+    check_values(cfg)
     if cfg.reward != "narration":
         if cfg.mem is not None or cfg.narration is not None:
             raise Sc2DataError("--mem and --narration go with --reward narration")
@@ -150,11 +165,15 @@ def make_vec_env(cfg: RLConfig, scorer: Any = None, narration: Any = None) -> An
     return SubprocVecEnv([functools.partial(_env_factory, cfg) for _ in range(cfg.envs)])
 
 
-def _read_json(path: Path) -> Any:
+def _read_json(path: Path, shape: Shape) -> dict[str, Any]:
+    """A run record, checked to have ``shape``."""
+    remedy = f"delete {path.parent} and train it again, or pick another --out"
     try:
-        return json.loads(path.read_text())
+        record = json.loads(path.read_text())
     except (OSError, ValueError) as e:
-        raise Sc2DataError(f"cannot read {path}: {e}") from None
+        raise Sc2DataError(f"cannot read {path}: {e}; {remedy}") from None
+    check_record(record, shape, path, remedy)
+    return record
 
 
 def _write_json(path: Path, data: Any) -> None:
@@ -187,14 +206,14 @@ def train(cfg: RLConfig) -> Path:
     run = Path(cfg.out)
     state: dict[str, Any] = {"timesteps": 0, "env_steps": 0, "episodes": 0, "resumes": 0}
     if (run / "config.json").is_file():
-        old = _read_json(run / "config.json")
+        old = _read_json(run / "config.json", CONFIG_SHAPE)
         if old != cfg.identity():
             diff = sorted(k for k in set(old) | set(cfg.identity())
                           if old.get(k) != cfg.identity().get(k))
             raise Sc2DataError(f"{run} holds a run with other settings ({', '.join(diff)}); "
                                f"rerun with the same options to resume, or pick another --out")
         if (run / "state.json").is_file() and (run / "model.zip").is_file():
-            state = _read_json(run / "state.json")
+            state = _read_json(run / "state.json", STATE_SHAPE)
             state["resumes"] += 1
     elif run.exists() and any(run.iterdir()):
         raise Sc2DataError(f"{run} exists and is not an sc2data rl run; pick another --out")
@@ -284,9 +303,13 @@ def load_config(run: Path) -> RLConfig:
     if not (run / "config.json").is_file() or not (run / "model.zip").is_file():
         raise Sc2DataError(f"{run} is not a trained sc2data rl run (no config.json and "
                            f"model.zip); train one with sc2data rl train --out {run}")
-    data = _read_json(run / "config.json")
-    known = {f.name for f in dataclasses.fields(RLConfig)}
-    return RLConfig(out=str(run), **{k: v for k, v in data.items() if k in known})
+    data = _read_json(run / "config.json", CONFIG_SHAPE)
+    cfg = RLConfig(out=str(run), **{k: data[k] for k in CONFIG_SHAPE})
+    try:
+        check_values(cfg)
+    except Sc2DataError as e:
+        raise Sc2DataError(f"{run / 'config.json'}: {e}") from None
+    return cfg
 
 
 def evaluate(run: Path, episodes: int = 10, deterministic: bool = True,
@@ -298,6 +321,7 @@ def evaluate(run: Path, episodes: int = 10, deterministic: bool = True,
     if episodes < 1:
         raise Sc2DataError("--episodes must be at least 1")
     cfg = load_config(run)
+    state = _read_json(run / "state.json", STATE_SHAPE) if (run / "state.json").is_file() else {}
     import torch
     from sb3_contrib import MaskablePPO
 
@@ -323,7 +347,6 @@ def evaluate(run: Path, episodes: int = 10, deterministic: bool = True,
             marines.append(int(info["marines"]))
             b.update(1)
     env.close()
-    state = _read_json(run / "state.json") if (run / "state.json").is_file() else {}
     result = {"episodes": episodes, "seeds": [EVAL_SEED + e for e in range(episodes)],
               "marines": marines, "mean": float(np.mean(marines)),
               "std": float(np.std(marines)), "deterministic": deterministic,
@@ -342,7 +365,7 @@ def plot(runs: Sequence[Path], out: Path, window: int = 10) -> Path:
         rows = read_curve(run)
         if not rows:
             raise Sc2DataError(f"{run} has no finished training episode to plot yet")
-        curves.append((run, load_config_loose(run), rows))
+        curves.append((run, _read_json(run / "config.json", CONFIG_SHAPE), rows))
     if window < 1:
         raise Sc2DataError("--window must be at least 1")
     import matplotlib
@@ -371,11 +394,6 @@ def plot(runs: Sequence[Path], out: Path, window: int = 10) -> Path:
     out.parent.mkdir(parents=True, exist_ok=True)
     write_atomic(out, buf.getvalue())
     return out
-
-
-def load_config_loose(run: Path) -> dict[str, Any]:
-    data = _read_json(run / "config.json")
-    return data if isinstance(data, dict) else {}
 
 
 def summary(result: dict[str, Any]) -> str:

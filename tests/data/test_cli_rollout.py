@@ -124,15 +124,18 @@ def test_older_schema_version(copy: Path, capsys: pytest.CaptureFixture[str]) ->
 
 def test_folder_of_an_older_format(copy: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """A folder written before frames were stored in blocks (dataset and shard format 1):
-    every command refuses it in one line, naming the format, and a rerun changes nothing."""
+    every command refuses it in one line, naming the format (verify: as its fault), and a rerun
+    changes nothing."""
     manifest = json.loads((copy / "dataset.json").read_text())
     (copy / "dataset.json").write_text(json.dumps({**manifest, "format_version": 1}))
     before = {p.name: p.read_bytes() for p in copy.iterdir()}
-    for args in (["verify", copy], ["info", copy],
+    for args in (["info", copy],
                  ["rollout", "--out", copy, "--env", "sim", "--agent", "random", "--episodes",
                   "3", "--seed", "7", "--episodes-per-shard", "2"]):
         code, _, err = cli(args, capsys)
         assert_one_line_error(code, err, "has dataset format 1, not 3; regenerate it")
+    code, _, err = cli(["verify", copy], capsys)
+    assert code == 1 and err.startswith("FAULT ") and "has dataset format 1, not 3" in err
     assert {p.name: p.read_bytes() for p in copy.iterdir()} == before
     (copy / "dataset.json").write_text(json.dumps(manifest))
     with h5py.File(copy / "shard-00001.h5", "r+") as f:
@@ -163,7 +166,7 @@ def test_verify_index_faults(copy: Path, capsys: pytest.CaptureFixture[str]) -> 
     assert "shard-00009.h5.partial: a partial file" in err
     (copy / INDEX).unlink()
     code, _, err = cli(["verify", copy], capsys)
-    assert_one_line_error(code, err, "unfinished rollout")
+    assert code == 1 and err.startswith("FAULT ") and "unfinished rollout" in err
 
 
 def test_verify_and_info_on_non_datasets(tmp_path: Path,

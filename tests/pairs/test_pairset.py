@@ -183,6 +183,9 @@ def test_a_shortage_gives_the_command_that_grows_the_data_enough(
 def test_pair_refuses_unlabelled_data_and_foreign_output(built: Path, tmp_path: Path) -> None:
     recipe = recipe_file(tmp_path, episodes="3", states_per_command="3", null_states="12")
     p = run("pair", recipe, "--data", tmp_path, ok=False)
+    assert p.returncode == 2 and "is not an sc2data dataset" in p.stderr
+    shutil.copytree(built / "rollout", tmp_path / "data", ignore=shutil.ignore_patterns("*label*"))
+    p = run("pair", recipe, "--data", tmp_path / "data", ok=False)
     assert p.returncode == 2 and "no labels in" in p.stderr
     (tmp_path / "busy").mkdir()
     (tmp_path / "busy" / "notes.txt").write_text("mine")
@@ -240,6 +243,61 @@ def test_relabel_with_identical_content_keeps_the_pair_set(built: Path, tmp_path
     run("label", data, "--no-progress")
     p = run("pair", recipe, "--data", data, "--out", tmp_path / "a", "--no-progress")
     assert "up to date" in p.stdout
+
+
+def _as_drawn_by_older_rules(pairs: Path, data: Path, shards: str | None = None) -> None:
+    """Rewrite ``pairs``' record as an earlier sc2data wrote it from labels whose build_scv rule
+    had other code (a docstring changed): that rule's code hash, the labels' fingerprint from it
+    (on ``shards``, default the data's own), and ``labels_created`` in its identity."""
+    from sc2data.labels.apply import labels_fingerprint
+    from sc2data.labels.store import read_meta
+
+    meta = json.loads((pairs / "pairset.json").read_text())
+    rules = meta["labels"]["rules"]
+    next(r for r in rules if r["id"] == "build_scv")["code_sha256"] = "0" * 64
+    fp = labels_fingerprint(shards or read_meta(data)["dataset"]["fingerprint"],
+                            [(r["id"], r["version"], r["code_sha256"]) for r in rules])
+    meta["labels"]["fingerprint"] = fp
+    meta["identity"].update(labels=fp, labels_created="2026-12-01T23:34:13+00:00")
+    (pairs / "pairset.json").write_text(json.dumps(meta, indent=2))
+
+
+def test_pair_set_from_older_rules_with_the_same_pairs_is_kept(built: Path,
+                                                              tmp_path: Path) -> None:
+    """A build folder whose pair set an earlier sc2data drew (its identity with the labels'
+    creation time, the labels since remade because a rule's code changed): the same shards and
+    the same pairs, so the rerun keeps it, files untouched, and its record names these labels."""
+    build = tmp_path / "build"
+    shutil.copytree(built, build)
+    _as_drawn_by_older_rules(build / "pairs", build / "rollout")
+    before = {p: p.read_bytes() for p in (build / "pairs").rglob("*") if p.suffix != ".json"
+              and p.is_file()}
+    recipe = recipe_file(tmp_path, episodes="3", states_per_command="3", null_states="12")
+    run("build", recipe, "--out", build, "--no-progress")
+    assert {p: p.read_bytes() for p in before} == before
+    meta = json.loads((build / "pairs" / "pairset.json").read_text())
+    assert meta["identity"] == json.loads((built / "pairs" / "pairset.json").read_text())[
+        "identity"]
+    run("verify", build / "pairs")
+
+
+def test_pair_set_from_other_labels_is_refused_saying_so(built: Path, tmp_path: Path) -> None:
+    """Drawn from other labels (other shards, or other verdicts): one line that says so and which
+    rules changed, and what to do; nothing changed. Another recipe's pair set is named."""
+    pairs = tmp_path / "pairs"
+    shutil.copytree(built / "pairs", pairs)
+    _as_drawn_by_older_rules(pairs, built / "rollout", shards="other shards")
+    record = (pairs / "pairset.json").read_bytes()
+    recipe = recipe_file(tmp_path, episodes="3", states_per_command="3", null_states="12")
+    p = run("pair", recipe, "--data", built / "rollout", "--out", pairs, ok=False)
+    assert p.returncode == 2 and p.stderr.count("\n") == 1, p.stderr
+    assert "from other labels than" in p.stderr and "rule(s) build_scv changed" in p.stderr
+    assert "delete it to draw it again" in p.stderr
+    assert (pairs / "pairset.json").read_bytes() == record
+    other = recipe_file(tmp_path, episodes="3", states_per_command="3", null_states="12",
+                        name='"other"')
+    p = run("pair", other, "--data", built / "rollout", "--out", built / "pairs", ok=False)
+    assert p.returncode == 2 and "holds the pair set of recipe 'smoke', not 'other'" in p.stderr
 
 
 def test_verify_covers_dataset_labels_and_pair_set(built: Path, tmp_path: Path) -> None:

@@ -38,7 +38,7 @@ def agreement(run: Path, mem: Path, *, episodes: int = 3, deterministic: bool = 
     """Play ``episodes`` episodes of the policy in ``run``; per-command agreement of the MEM in
     ``mem`` with the rules on the stacks visited. Written to ``out`` (default
     ``RUN/agreement.json``) and returned."""
-    from sc2data.rl.train import load_config, require_rl
+    from sc2data.rl.train import load_config, play, require_rl
 
     require_rl("sc2data rl agreement")
     if episodes < 1:
@@ -79,13 +79,7 @@ def agreement(run: Path, mem: Path, *, episodes: int = 3, deterministic: bool = 
     marines: list[int] = []
     try:
         for e in range(episodes):
-            obs, _ = env.reset(seed=AGREEMENT_SEED + e)
-            done = False
-            while not done:
-                action, _ = model.predict(obs, deterministic=deterministic,
-                                          action_masks=env.action_masks())
-                obs, _, terminated, truncated, info = env.step(action)
-                done = terminated or truncated
+            for info in play(model, env, AGREEMENT_SEED + e, deterministic):
                 frames = env.frames
                 if len(frames) < 2:
                     continue

@@ -26,7 +26,7 @@ import functools
 import io
 import json
 import typing
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -337,13 +337,8 @@ def evaluate(run: Path, episodes: int = 10, deterministic: bool = True,
     marines: list[int] = []
     with bar(episodes, desc="rl evaluate", unit="episode", show=progress) as b:
         for e in range(episodes):
-            obs, _ = env.reset(seed=EVAL_SEED + e)
-            done = False
-            while not done:
-                action, _ = model.predict(obs, deterministic=deterministic,
-                                          action_masks=env.action_masks())
-                obs, _, terminated, truncated, info = env.step(action)
-                done = terminated or truncated
+            for info in play(model, env, EVAL_SEED + e, deterministic):
+                pass
             marines.append(int(info["marines"]))
             b.update(1)
     env.close()
@@ -354,6 +349,19 @@ def evaluate(run: Path, episodes: int = 10, deterministic: bool = True,
               state.get("env_steps"), "config": cfg.identity()}
     _write_json(run / ("eval.json" if deterministic else "eval-stochastic.json"), result)
     return result
+
+
+def play(model: Any, env: Any, seed: int, deterministic: bool) -> Iterator[dict[str, Any]]:
+    """One seeded episode of ``model``'s masked policy on ``env``: the info of each decision
+    (``env.frames`` then holds that decision's pysc2 observations)."""
+    obs, _ = env.reset(seed=seed)
+    done = False
+    while not done:
+        action, _ = model.predict(obs, deterministic=deterministic,
+                                  action_masks=env.action_masks())
+        obs, _, terminated, truncated, info = env.step(action)
+        done = terminated or truncated
+        yield info
 
 
 def plot(runs: Sequence[Path], out: Path, window: int = 10) -> Path:

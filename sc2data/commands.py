@@ -379,6 +379,7 @@ def train_cmd(config: Optional[TrainConfig] = None) -> None:
 
 
 @app.command("evaluate")
+@with_options(PROGRESS)
 def evaluate_cmd(
     run: Path = typer.Argument(..., help="Run folder (sc2data train --out)."),
     data: Optional[Path] = typer.Option(None, help="Pair-set folder [default: the run's]."),
@@ -388,16 +389,18 @@ def evaluate_cmd(
     allow_unfinished: bool = typer.Option(False, help="Evaluate a run that did not finish."),
     other_data: bool = typer.Option(False, help="Evaluate on a pair set other than the run's own "
                                                 "(report: RUN/eval-<fingerprint>.json)."),
+    progress: Optional[bool] = None,
 ) -> None:
     """Accuracy (beside the paper's), ROC-AUC, retrieval, phrasings; writes RUN/eval.json."""
     from sc2data.model.evaluate import evaluate, format_report
 
-    report = evaluate(run, data, device, text, allow_unfinished, other_data)
+    report = evaluate(run, data, device, text, allow_unfinished, other_data, progress)
     typer.echo(format_report(report))
     typer.echo(f"wrote {report['written_to']}")
 
 
 @app.command("tsne")
+@with_options(PROGRESS)
 def tsne_cmd(
     run: Path = typer.Argument(..., help="Run folder (sc2data train --out)."),
     data: Optional[Path] = typer.Option(None, help="Pair-set folder [default: the run's]."),
@@ -408,8 +411,9 @@ def tsne_cmd(
     seed: int = typer.Option(0, help="Seed of the sample and of t-SNE."),
     device: str = typer.Option("auto", help="auto, cpu or cuda."),
     allow_unfinished: bool = typer.Option(False, help="Draw a run that did not finish."),
+    progress: Optional[bool] = None,
 ) -> None:
     """A t-SNE map of state and command embeddings, like the paper's Fig. 3."""
     from sc2data.model.evaluate import tsne
 
-    typer.echo(f"wrote {tsne(run, data, out, states, seed, text, device, allow_unfinished)}")
+    typer.echo(f"wrote {tsne(run, data, out, states, seed, text, device, allow_unfinished, progress)}")

@@ -16,6 +16,8 @@ class Bar(Protocol):
 
     def refresh(self) -> None: ...
 
+    def set_postfix(self, **values: Any) -> None: ...
+
     def __enter__(self) -> Any: ...
 
     def __exit__(self, *exc: object) -> None: ...
@@ -40,12 +42,12 @@ class _Lines:
         self.stream.flush()
 
 
-def bar(total: int, *, desc: str, unit: str, show: bool | None) -> Bar:
+def bar(total: int, *, desc: str, unit: str, show: bool | None, leave: bool = True) -> Bar:
     """A tqdm progress bar over ``total`` units.
 
     ``show``: True, a live bar; False, none; None, a live bar when stderr is a terminal and, when
     it is a file (``sc2data build … 2> log``), one line every :data:`LOG_EVERY_S` seconds once
-    the work has lasted that long.
+    the work has lasted that long. ``leave``: keep the finished live bar on the terminal.
     """
     from tqdm import tqdm
 
@@ -54,4 +56,4 @@ def bar(total: int, *, desc: str, unit: str, show: bool | None) -> Bar:
                     file=_Lines(sys.stderr), mininterval=LOG_EVERY_S, maxinterval=LOG_EVERY_S,
                     delay=LOG_EVERY_S)
     return tqdm(total=total, desc=desc, unit=unit, unit_scale=True, dynamic_ncols=True,
-                smoothing=0.1, disable=show is False)
+                smoothing=0.1, disable=show is False, leave=leave)

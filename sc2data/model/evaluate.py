@@ -33,6 +33,7 @@ from sc2data.errors import Sc2DataError
 from sc2data.files import check_out, write_atomic
 from sc2data.model.reward import MEMScorer, load_model, pairwise
 from sc2data.pairs.loader import PairSet
+from sc2data.progress import bar as progress_bar
 from sc2data.vocab import SPLITS
 
 PAPER = {"train": 0.9561, "val": 0.8235, "test": 0.8040}
@@ -77,9 +78,15 @@ def auc(score: np.ndarray, positive: np.ndarray) -> float:
     return float(roc_auc_score(positive, score))
 
 
-def _embed_split(scorer: MEMScorer, data: PairSet, split: str) -> np.ndarray:
-    with data.packed(split) as packed:
-        parts = [scorer.embed_states(b) for _, b in packed.blocks(keys=scorer.model.state.keys())]
+def _embed_split(scorer: MEMScorer, data: PairSet, split: str,
+                 progress: bool | None = None) -> np.ndarray:
+    """Every packed state of ``split`` through the state encoder, with a progress bar."""
+    parts = []
+    with data.packed(split) as packed, \
+            progress_bar(len(packed), desc=f"embed {split}", unit="state", show=progress) as bar:
+        for _, b in packed.blocks(keys=scorer.model.state.keys()):
+            parts.append(scorer.embed_states(b))
+            bar.update(len(parts[-1]))
     return np.concatenate(parts) if parts else np.zeros((0, scorer.model.cfg.dim), np.float32)
 
 
@@ -104,13 +111,15 @@ def parse_text_option(value: str, ids: Sequence[str]) -> tuple[str, str]:
 
 def evaluate(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None,
              device: str = "auto", texts: Sequence[str] = (),
-             allow_unfinished: bool = False, other_data: bool = False) -> dict[str, Any]:
+             allow_unfinished: bool = False, other_data: bool = False,
+             progress: bool | None = None) -> dict[str, Any]:
     """Compute every metric for ``run`` on its pair set (or ``data``); write RUN/eval.json.
 
     ``texts`` are extra phrasings to measure, each ``"PHRASE=command_id"``. A pair set other than
     the one the run was trained on (another fingerprint: re-split or re-drawn, so its test split may
     hold training states) is refused unless ``other_data``; its report then goes to
-    ``RUN/eval-<fingerprint>.json`` and the run's own ``eval.json`` is kept.
+    ``RUN/eval-<fingerprint>.json`` and the run's own ``eval.json`` is kept. ``progress``: a
+    bar per split embedded (see :func:`sc2data.progress.bar`).
     """
     run = Path(run)
     scorer = load_model(run, device, allow_unfinished=allow_unfinished)
@@ -136,7 +145,7 @@ def evaluate(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = 
         pairs = pairset.pairs(split)
         if len(pairs) == 0:
             continue
-        states = _embed_split(scorer, pairset, split)
+        states = _embed_split(scorer, pairset, split, progress)
         texts = sorted(set(pairs.command.tolist()))
         text_e = scorer.embed_texts(texts)
         which = np.searchsorted(texts, pairs.command)
@@ -317,7 +326,8 @@ def separation_note(states: np.ndarray, labels: np.ndarray, commands: np.ndarray
 
 def tsne(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None,
          out: str | os.PathLike[str] | None = None, states: int = 2000, seed: int = 0,
-         texts: Sequence[str] = (), device: str = "auto", allow_unfinished: bool = False) -> Path:
+         texts: Sequence[str] = (), device: str = "auto", allow_unfinished: bool = False,
+         progress: bool | None = None) -> Path:
     """Plot test-state and command embeddings in one t-SNE map (the paper's Fig. 3) as a PNG."""
     if out is not None:
         check_out(Path(out))
@@ -336,7 +346,7 @@ def tsne(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None
     rng = np.random.default_rng(seed)
     pick = np.sort(rng.permutation(len(rows))[:states])
     rows, labels = rows[pick], labels[pick]
-    emb = _embed_split(scorer, pairset, split)[rows]
+    emb = _embed_split(scorer, pairset, split, progress)[rows]
     ids = [str(c["id"]) for c in pairset.commands]
     canon = pairset.texts()
     marks = [(canon[i], i, "canonical") for i in ids]

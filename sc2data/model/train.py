@@ -52,6 +52,7 @@ from sc2data.formats import Shape, check_record
 from sc2data.model.words import load_word_vectors
 from sc2data.pairs.loader import PairLoader, PairSet
 from sc2data.provenance import versions
+from sc2data.progress import bar as progress_bar
 
 CHECKPOINTS = ("best.pt", "last.pt")
 NEXT = ".next"
@@ -104,8 +105,9 @@ class TrainConfig:
     decoded stacks per block-window of the paper's 20 layers)."""
     overwrite: bool = False
     """Reuse a non-empty run folder (its previous run files are deleted)."""
-    progress: bool = True
-    """Show a progress bar with pairs/s."""
+    progress: bool | None = None
+    """A progress bar with pairs/s and a line per epoch [default: on a terminal; with stderr in a
+    file, a bar line a minute]."""
     name: str = field(default="", init=False)
     """Run name ``{recipe}__{seed}__{time}``, set when the run starts."""
 
@@ -264,14 +266,15 @@ def train(cfg: TrainConfig) -> Path:
             for epoch in range(first, cfg.epochs + 1):
                 model.train()
                 t0, c0, acc = time.perf_counter(), time.process_time(), torch.zeros(3, device=device)
-                bar = tqdm(train_loader.epoch(epoch), total=len(train_loader), unit="batch",
-                           desc=f"epoch {epoch}/{cfg.epochs}", disable=not cfg.progress, leave=False)
-                for i, batch in enumerate(bar):
-                    acc += step(batch, True)
-                    if cfg.progress and i % 20 == 0:
-                        e, c, n = acc.tolist()
-                        bar.set_postfix(loss=f"{e / n:.4f}", acc=f"{c / n:.3f}",
-                                        pairs_s=f"{n / (time.perf_counter() - t0):.0f}")
+                with progress_bar(len(train_loader), desc=f"epoch {epoch}/{cfg.epochs}",
+                                  unit="batch", show=cfg.progress, leave=False) as bar:
+                    for i, batch in enumerate(train_loader.epoch(epoch)):
+                        acc += step(batch, True)
+                        bar.update(1)
+                        if cfg.progress is not False and i % 20 == 0:
+                            e, c, n = acc.tolist()
+                            bar.set_postfix(loss=f"{e / n:.4f}", acc=f"{c / n:.3f}",
+                                            pairs_s=f"{n / (time.perf_counter() - t0):.0f}")
                 sums = acc.tolist()
                 seconds, cpu_seconds = time.perf_counter() - t0, time.process_time() - c0
                 model.eval()
@@ -309,7 +312,7 @@ def train(cfg: TrainConfig) -> Path:
                                "python_rng": random.getstate()}, run / f"last.pt{NEXT}")
                 _write_state(run, epoch, cfg.epochs)
                 _settle(run, read_state(run))
-                if cfg.progress:
+                if cfg.progress is not False:
                     tqdm.write(f"epoch {epoch:>3}  train loss {row['train_loss']:.4f} acc "
                                f"{row['train_acc']:.2%}  val loss {val_loss:.4f} acc "
                                f"{row['val_acc']:.2%}  {row['pairs_per_s']:.0f} pairs/s"

@@ -54,7 +54,7 @@ def test_evaluate_on_fixed_distances_matches_a_hand_count(
     pairs = PairSet(config["data"])
     rng = np.random.default_rng(1)
     chosen = {s: rng.random(int(pairs.pairs(s).state.max()) + 1) for s in ("train", "val", "test")}
-    monkeypatch.setattr(ev, "_embed_split", lambda scorer, data, split: np.pad(
+    monkeypatch.setattr(ev, "_embed_split", lambda scorer, data, split, progress=None: np.pad(
         chosen[split][:, None], ((0, 0), (0, 255))).astype(np.float32))
     monkeypatch.setattr(ev.MEMScorer, "embed_texts",
                         lambda self, texts: np.zeros((len(texts), 256), np.float32))
@@ -180,3 +180,30 @@ def test_tsne_says_when_a_model_has_separated_nothing() -> None:
     assert note is not None and "has not separated" in note and "0% of" in note
     assert "chance 33%" in note
     assert separation_note(mixed, np.array([""] * 6), commands, ids) is None  # null states only
+
+
+@pytest.mark.parametrize("command", ["train", "evaluate", "tsne"])
+def test_long_model_commands_write_progress_lines_to_a_log_file(
+        run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch, command: str) -> None:
+    """With stderr in a file (capsys: not a terminal), train, evaluate and tsne write whole
+    progress lines once their work lasts — never a carriage-return bar."""
+    from sc2data import progress
+
+    monkeypatch.setattr(progress, "LOG_EVERY_S", 0.0)
+    data = json.loads((run / "config.json").read_text())["data"]
+    argv = {"train": ["train", data, "--out", str(tmp_path / "r"), "--epochs", "1",
+                      "--vocab-size", "2000", "--threads", "1"],
+            "evaluate": ["evaluate", str(run)],
+            "tsne": ["tsne", str(run), "--out", str(tmp_path / "t.png"), "--states", "30"]}
+    code, out, err = run_cli(argv[command], capsys)
+    assert code == 0, err
+    desc = "epoch 1/1:" if command == "train" else "embed "
+    lines = [line for line in err.splitlines() if line.startswith(desc)]
+    assert lines and "\r" not in err, err
+    if command == "train":
+        assert "epoch   1  train loss" in out  # the epoch's summary line, in the log too
+    code, out, err = run_cli([*argv[command], "--no-progress"] if command != "train" else
+                             [*argv[command][:3], str(tmp_path / "r2"), *argv[command][4:],
+                              "--no-progress"], capsys)
+    assert code == 0 and not err.strip(), err

@@ -274,7 +274,8 @@ def train(cfg: TrainConfig) -> Path:
                         if cfg.progress is not False and i % 20 == 0:
                             e, c, n = acc.tolist()
                             bar.set_postfix(loss=f"{e / n:.4f}", acc=f"{c / n:.3f}",
-                                            pairs_s=f"{n / (time.perf_counter() - t0):.0f}")
+                                            pairs_s=f"{n / (time.perf_counter() - t0):.0f}",
+                                            refresh=False)  # drawn when the bar next is
                 sums = acc.tolist()
                 seconds, cpu_seconds = time.perf_counter() - t0, time.process_time() - c0
                 model.eval()

@@ -99,8 +99,10 @@ def _fails_in_one_line(*args: object) -> None:
     assert "No space left on device" in lines[0], lines[0]
 
 
-def test_rollout(ref: Path, fs: Path) -> None:
-    args = [*ROLLOUT, "--recipe", ref / "tiny.toml", "--out", fs / "data"]
+@pytest.mark.parametrize("workers", ["1", "2"])
+def test_rollout(ref: Path, fs: Path, workers: str) -> None:
+    """In one process, and in two worker processes (the parent reports the worker's error)."""
+    args = [*ROLLOUT, "--recipe", ref / "tiny.toml", "--out", fs / "data", "--workers", workers]
     ballast = _leave(fs, _bytes(ref / "data") // 2)
     _fails_in_one_line(*args)
     data = fs / "data"

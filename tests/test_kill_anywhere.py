@@ -78,9 +78,9 @@ def _run(args: list[str]) -> float:
     return time.monotonic() - t0
 
 
-def _stop_at(args: list[str], seconds: float, sig: int) -> None:
-    """Start ``args`` and send ``sig`` after ``seconds`` (if still running); a Ctrl-C must end in
-    exit 130 and one line, a kill in the kill."""
+def _stop_at(args: list[str], seconds: float, sig: int) -> bool:
+    """Start ``args`` and send ``sig`` after ``seconds``; a Ctrl-C must end in exit 130 and one
+    line, a kill in the kill. False when the run finished before the signal."""
     proc = subprocess.Popen(args, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             text=True, start_new_session=True,  # SIGINT as a terminal job has it
                             preexec_fn=lambda: signal.signal(  # noqa: PLW1509 - one signal() call
@@ -90,7 +90,7 @@ def _stop_at(args: list[str], seconds: float, sig: int) -> None:
         proc.send_signal(sig)
     _, err = proc.communicate(timeout=300)
     if proc.returncode == 0:
-        return  # it finished before the signal
+        return False
     assert "Traceback" not in err, err
     if sig == signal.SIGINT:
         assert proc.returncode == 130, err
@@ -98,6 +98,7 @@ def _stop_at(args: list[str], seconds: float, sig: int) -> None:
             "sc2data: interrupted; rerun the same command to resume", err
     else:
         assert proc.returncode == -signal.SIGKILL, err
+    return True
 
 
 def _stopped_then_finished(args: list[str], duration: float, rng: random.Random) -> None:
@@ -105,8 +106,10 @@ def _stopped_then_finished(args: list[str], duration: float, rng: random.Random)
     moment, sig = rng.uniform(0.0, duration), rng.choice(SIGNALS)
     print(f"SC2DATA_KILL_SEED={SEED}: stopping {args[3]} at {moment:.2f} s of {duration:.2f} s "
           f"({'kill -9' if sig == signal.SIGKILL else 'Ctrl-C'})")
-    _stop_at(args, moment, sig)
-    _run(args)
+    if _stop_at(args, moment, sig):
+        _run(args)
+    else:
+        print("it finished before the signal")
 
 
 def _sha(path: Path) -> str:

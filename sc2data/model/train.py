@@ -187,7 +187,14 @@ def train(cfg: TrainConfig) -> Path:
     run = _make_run_folder(Path(cfg.out or Path("runs") / cfg.name))
     with FolderLock(run, "train"), writing(f"the run {run}", "free some space, then rerun the "
                                                             "same command to resume"):
-        resumed = _prepare_run(run, cfg)  # under the lock: another train cannot be writing
+        try:
+            resumed = _prepare_run(run, cfg)  # under the lock: another train cannot be writing
+        except RunFinished:
+            for s in (train_split, val_split):
+                s.close()
+            if cfg.progress is not False:
+                tqdm.write(f"{run} is a finished run of these settings; nothing to do")
+            return run
         mcfg = M.ModelConfig(categorical=cfg.categorical, pool=cfg.pool,  # type: ignore[arg-type]
                              conv=M.conv_for(cfg.pool),
                              text_encoder=cfg.text_encoder)  # type: ignore[arg-type]
@@ -349,10 +356,11 @@ def _prepare_run(run: Path, cfg: TrainConfig) -> dict[str, Any] | None:
         for p in present:  # stopped before its first epoch ended (a full disk, Ctrl-C): its
             p.unlink()     # config and any partial checkpoint are all there is; start again
         return None
+    if state is not None and state["finished"] and not cfg.overwrite and not _differs(run, cfg):
+        check_run(run)  # the same command again: nothing to do, once the run checks out
+        raise RunFinished(run)
     if state is not None and not state["finished"] and not cfg.overwrite:
-        old = read_config(run) or {}
-        new = asdict(cfg)
-        diff = sorted(k for k in new if k not in RESUME_IGNORES and old.get(k) != new[k])
+        diff = _differs(run, cfg)
         if diff:
             raise Sc2DataError(f"run folder {run} holds an unfinished run with other settings "
                                f"(differs in: {', '.join(diff)}); rerun it with its own "
@@ -362,12 +370,23 @@ def _prepare_run(run: Path, cfg: TrainConfig) -> dict[str, Any] | None:
         check_run(run, allow_unfinished=True, files=("config.json", "last.pt", "metrics.jsonl"))
         return state
     if not cfg.overwrite:
-        what = "a finished run" if state is not None else "files that are not a resumable run"
+        what = (f"a finished run with other settings (differs in: {', '.join(_differs(run, cfg))})"
+                if state is not None else "files that are not a resumable run")
         raise Sc2DataError(f"run folder {run} exists and is not empty (it holds {what}); choose "
                            f"another --out or pass --overwrite")
     for name in RUN_FILES:
         (run / name).unlink(missing_ok=True)
     return None
+
+
+class RunFinished(Exception):
+    """The run folder holds a finished run of these very settings: rerunning has nothing to do."""
+
+
+def _differs(run: Path, cfg: TrainConfig) -> list[str]:
+    """The settings of ``cfg`` that differ from those the run in ``run`` was started with."""
+    old, new = read_config(run) or {}, asdict(cfg)
+    return sorted(k for k in new if k not in RESUME_IGNORES and old.get(k) != new[k])
 
 
 def _keep_rows(path: Path, n: int) -> None:

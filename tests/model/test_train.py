@@ -106,14 +106,23 @@ def test_same_seed_same_run(data: Path, tmp_path: Path) -> None:
 
 def test_cli_trains_and_refuses_a_used_run_folder(data: Path, tmp_path: Path,
                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """The same command again finds the run finished and does nothing; other settings into the
+    finished run are refused, naming what differs, unless --overwrite."""
     args = ["train", str(data), "--out", str(tmp_path / "run"), "--epochs", "1",
             "--vocab-size", "1000", "--no-progress", "--threads", "1"]
     code, out, err = run_cli(args, capsys)
     assert code == 0, err
     assert f"run: {tmp_path / 'run'}" in out
-    code, _, err = run_cli(args, capsys)
-    assert_one_line_error(code, err, "not empty", "--overwrite")
-    code, _, err = run_cli(args + ["--overwrite"], capsys)
+    best = (tmp_path / "run" / "best.pt").read_bytes()
+    code, out, err = run_cli(args, capsys)
+    assert code == 0 and not err and f"run: {tmp_path / 'run'}" in out, err
+    assert (tmp_path / "run" / "best.pt").read_bytes() == best  # untouched
+    code, out, err = run_cli([a for a in args if a != "--no-progress"], capsys)  # says so
+    assert code == 0 and "finished run of these settings; nothing to do" in out, err
+    code, _, err = run_cli(args + ["--lr", "1e-3"], capsys)
+    assert_one_line_error(code, err, "not empty", "finished run with other settings",
+                          "differs in: lr", "--overwrite")
+    code, _, err = run_cli(args + ["--overwrite", "--lr", "1e-3"], capsys)
     assert code == 0, err
 
 

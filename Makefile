@@ -23,8 +23,9 @@ rl-demo: $(VENV)/.stamp
 	$(BIN)/sc2data rl evaluate $(DEMO)/rl-narration --episodes 3
 	$(BIN)/sc2data rl plot $(DEMO)/rl-narration --out $(DEMO)/rl-curves.png
 
+# Two processes (pytest-xdist), a test file to each at a time: module fixtures are built once.
 test: $(VENV)/.stamp
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n 2 --dist loadfile
 
 bench: $(VENV)/.stamp
 	$(PY) benchmarks/bench_env.py

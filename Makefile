@@ -7,11 +7,12 @@ DEMO   ?= demo-out
 
 .PHONY: demo rl-demo test bench clean
 
-# One stamp per dependency set: rebuilt when pyproject.toml changes.
+# One stamp per dependency set: rebuilt when pyproject.toml changes. --no-compile: modules are
+# byte-compiled when first imported instead of all at install (measured: 129 s → 92 s with the
+# pip upgrade dropped too; Python 3.11's own pip installs this project).
 $(VENV)/.stamp: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -e '.[train,test]'
+	$(PY) -m pip install -q --no-compile -e '.[train,test]'
 	touch $@
 
 demo: $(VENV)/.stamp

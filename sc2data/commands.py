@@ -416,4 +416,5 @@ def tsne_cmd(
     """A t-SNE map of state and command embeddings, like the paper's Fig. 3."""
     from sc2data.model.evaluate import tsne
 
-    typer.echo(f"wrote {tsne(run, data, out, states, seed, text, device, allow_unfinished, progress)}")
+    path = tsne(run, data, out, states, seed, text, device, allow_unfinished, progress)
+    typer.echo(f"wrote {path}")

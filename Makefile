@@ -8,7 +8,7 @@ DEMO   ?= demo-out
 .PHONY: demo rl-demo test bench clean
 
 # One stamp per dependency set: rebuilt when pyproject.toml changes. Python 3.11's own pip
-# installs this project, so it is not upgraded first (12 s saved). Packages stay byte-compiled at
+# installs this project, so it is not upgraded first (the venv and the upgrade took 12 s). Packages stay byte-compiled at
 # install: with PYTHONDONTWRITEBYTECODE set, as on this project's machines, `--no-compile` made
 # every process compile torch again (suite 7:51 → 13:35).
 $(VENV)/.stamp: pyproject.toml

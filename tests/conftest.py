@@ -5,12 +5,11 @@ from __future__ import annotations
 import pytest
 
 
-LONGEST_FIRST = ("tests/scaleout/", "tests/test_docs.py", "tests/test_layout.py",
-                 "tests/test_kill_anywhere.py", "tests/pairs/test_pairset.py")
-"""Files run first, in this order, for ``make test``'s two processes (pytest-xdist, one file to a
-process at a time, two files handed to each at the start): the two longest (``pytest
---durations``) start at once, one on each process; the first then gets a short file and the
-second the next long one, so that the long files do not end up last and alone."""
+LONGEST_FIRST = ("tests/scaleout/", "tests/test_docs.py", "tests/test_kill_anywhere.py",
+                 "tests/pairs/test_pairset.py")
+"""The files that take longest (``pytest --durations``), run first: with ``make test``'s two
+processes (pytest-xdist, one file to a process at a time) a long file does not start last. Not
+measured against the plain order."""
 
 
 def _rank(item: pytest.Item) -> int:

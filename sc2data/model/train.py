@@ -345,8 +345,9 @@ def _make_run_folder(run: Path) -> Path:
 
 def _prepare_run(run: Path, cfg: TrainConfig) -> dict[str, Any] | None:
     """Ready the locked run folder: the state to resume from (an unfinished run of the same
-    config), else None with the folder empty of run files; any other non-empty folder is
-    refused unless ``--overwrite``."""
+    config), else None with the folder empty of run files; :class:`RunFinished` for a finished
+    run of the same config (checked); any other non-empty folder is refused unless
+    ``--overwrite``."""
     present = [p for p in run.iterdir() if p.name != LOCK]
     if not present:
         return None

@@ -203,7 +203,7 @@ def test_long_model_commands_write_progress_lines_to_a_log_file(
     assert lines and "\r" not in err, err
     if command == "train":
         assert "epoch   1  train loss" in out  # the epoch's summary line, in the log too
-    if command == "train":  # short work, the real interval: no bar line at all
+        # short work at the real interval: no bar line at all
         monkeypatch.setattr(progress, "LOG_EVERY_S", 60.0)
         code, out, err = run_cli([*argv[command][:3], str(tmp_path / "r1"), *argv[command][4:]],
                                  capsys)

@@ -6,7 +6,8 @@ import os
 from pathlib import Path
 from typing import Any, Literal
 
-from sc2data._pysc2 import environment, interface_format, sc2_env
+from sc2data import _pysc2
+from sc2data._pysc2 import environment, interface_format
 from sc2data.errors import Sc2DataError
 from sc2data.vocab import BACKENDS, MAP_NAME, STEP_MUL
 
@@ -62,6 +63,7 @@ def make_env(backend: str = "sim", *, seed: int | None = None, step_mul: int = S
         if not sc2_available():
             raise Sc2DataError(f"StarCraft II or the BuildMarines map was not found under "
                                f"{sc2_path()}; {SC2_INSTALL_HINT}")
+        sc2_env = _pysc2.sc2_env
         game: Any = sc2_env.SC2Env
         if mocked():
             from sc2data.game.mock_sc2 import MockSC2Env

@@ -23,10 +23,12 @@ import sc2data
 from sc2data.data.dataset import INDEX
 from sc2data.data.rollout import RolloutConfig, _make_agent, episode_seeds, rollout
 from sc2data.errors import Sc2DataError
+from sc2data.files import sha256_file
 from sc2data.labels.label import label_dataset
 from sc2data.labels.store import STACKS_FILE
 from sc2data.scaleout.driver import RayOptions, label_on_ray, rollout_on_ray
 from tests.cli import assert_one_line_error, run_cli
+from tests.test_disk_full import _leave, fs  # noqa: F401  (fs: a small tmpfs, a fixture)
 
 CONFIG = RolloutConfig(env="sim", agent="reduced-random", episodes=4, episodes_per_shard=1,
                        max_steps=40, seed=5)
@@ -359,3 +361,22 @@ def test_bad_build_options_fail_in_one_line(args: list[str], match: str, tmp_pat
     code, _, err = run_cli(["build", recipe, "--out", tmp_path / "out", *args], capsys)
     assert_one_line_error(code, err, f"sc2data: error: {match}")
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.slow
+def test_a_full_disk_fails_the_run_in_one_line_and_a_rerun_resumes(
+        ray_instance: Any, reference: Path, fs: Path) -> None:
+    """Ray tasks writing to a filesystem that fills part-way: one line naming the full disk,
+    nothing that looks complete, and with space again the rerun gives the local run's bytes."""
+    out = fs / "data"
+    ballast = _leave(fs, sum(p.stat().st_size for p in reference.glob("shard-*.h5")) // 2)
+    with pytest.raises(Sc2DataError) as caught:
+        rollout_on_ray(CONFIG, out, RayOptions(retries=1, timeout_s=60), progress=False)
+    message = str(caught.value)
+    assert "\n" not in message and "No space left on device" in message, message
+    assert not (out / INDEX).exists() and not list(out.glob("*.partial"))
+    for shard in out.glob("shard-*.h5"):
+        assert sha256_file(shard) == sha256_file(reference / shard.name)
+    ballast.unlink()
+    rollout_on_ray(CONFIG, out, RayOptions(), progress=False)
+    assert_same_data(out, reference)

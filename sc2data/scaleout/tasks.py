@@ -20,7 +20,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from sc2data.errors import Sc2DataError
+from sc2data.errors import Sc2DataError, reason
+from sc2data.files import FULL
 
 _REPORT_EVERY_S = 0.5
 
@@ -43,8 +44,15 @@ class Reporter:
 
 
 def describe(e: BaseException) -> str:
-    """An exception in one line, as a local run reports it."""
-    return str(e) if isinstance(e, Sc2DataError) else f"{type(e).__name__}: {e}"
+    """An exception in one line, as a local run reports it: a write the disk refused as its
+    errno's text and what to do (HDF5's own message runs over several lines), anything else by
+    type and first line."""
+    if isinstance(e, Sc2DataError):
+        return str(e)
+    if isinstance(e, OSError) and e.errno in FULL:
+        return f"{reason(e)}; free some space, then rerun the same command to resume"
+    first = (str(e).strip().splitlines() or [""])[0]
+    return f"{type(e).__name__}: {first}" if first else type(e).__name__
 
 
 def _peak_rss(children: bool) -> dict[str, float]:

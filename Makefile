@@ -7,13 +7,17 @@ DEMO   ?= demo-out
 
 .PHONY: demo rl-demo test bench clean
 
+# Byte-code is written on first import, as Python does by default: some machines set
+# PYTHONDONTWRITEBYTECODE, and then every process compiles torch again (suite 7:51 → 13:35).
+unexport PYTHONDONTWRITEBYTECODE
+
 # One stamp per dependency set: rebuilt when pyproject.toml changes. Python 3.11's own pip
-# installs this project, so it is not upgraded first (the venv and the upgrade took 12 s). Packages stay byte-compiled at
-# install: with PYTHONDONTWRITEBYTECODE set, as on this project's machines, `--no-compile` made
-# every process compile torch again (suite 7:51 → 13:35).
+# installs this project, so it is not upgraded first (the venv and the upgrade took 12 s).
+# `--no-compile`: pip does not byte-compile every installed file (most are never imported);
+# what is imported is compiled once, on first import.
 $(VENV)/.stamp: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install -q -e '.[train,test]'
+	$(PY) -m pip install -q --no-compile -e '.[train,test]'
 	touch $@
 
 demo: $(VENV)/.stamp

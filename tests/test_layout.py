@@ -68,3 +68,18 @@ def test_imports_never_go_upward() -> None:
 def test_levels_name_every_subpackage() -> None:
     subpackages = {p.parent.name for p in PACKAGE.glob("*/__init__.py")}
     assert subpackages <= set(LEVELS), subpackages - set(LEVELS)
+
+
+def test_commands_start_without_torch_or_the_real_games_environment() -> None:
+    """Every ``sc2data`` process imports :mod:`sc2data.commands`: it must not pull in torch or
+    pysc2's ``sc2_env`` (whose renderer imports scikit-video and SciPy, 1.8 s of a 3.7 s start;
+    BENCHMARKS.md, "Start-up and the test suite")."""
+    import subprocess
+    import sys
+
+    heavy = ["torch", "pysc2.env.sc2_env", "scipy", "skvideo"]
+    code = ("import sys, sc2data.commands; "
+            f"print(' '.join(m for m in {heavy!r} if m in sys.modules))")
+    done = subprocess.run([sys.executable, "-c", code], cwd=PACKAGE.parent, capture_output=True,
+                          text=True, check=True)
+    assert done.stdout.strip() == "", f"sc2data.commands imports {done.stdout.strip()}"

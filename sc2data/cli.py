@@ -11,7 +11,8 @@ exit 2; Ctrl-C prints ``sc2data: interrupted; …`` and exits 130, wherever it l
   the same status and line, as a cleanup that hangs would need: every file is then complete
   under its final name or a ``….partial`` one that readers and reruns discard, as after ``kill``;
 * once the command's outcome is printed, Ctrl-C is ignored while Python shuts down (whose
-  default handler would kill the process with status −2).
+  default handler would kill the process with status −2), and CPython's mark of an unhandled
+  interrupt, which ``python -m`` would act on the same way, is cleared.
 
 A process started with SIGINT ignored (a background job) keeps ignoring it.
 """
@@ -75,6 +76,14 @@ def _take_sigint() -> Any:
         return None
 
 
+def _forget_unhandled_interrupt() -> None:
+    """Clear CPython's mark of a ``KeyboardInterrupt`` left unhandled: it is set whenever one
+    passes out of ``exec`` or ``eval`` of a string (dataclasses and namedtuples make their methods
+    so), even when it is handled further up, and ``python -m`` ends a marked process by SIGINT
+    (status -2) after it has exited. Each such ``exec`` clears the mark as it starts."""
+    exec("None")  # noqa: S102 - a constant, compiled for its side effect above
+
+
 def _bare_ray(argv: list[str]) -> list[str]:
     """``--ray`` with no address means ``--ray local``: typer has no optional option values."""
     from sc2data.scaleout.driver import is_address
@@ -124,6 +133,7 @@ def main(argv: list[str] | None = None) -> None:
         code = 130
     if code == 130:
         _say_interrupted()
+    _forget_unhandled_interrupt()
     if previous is not None:  # an in-process caller gets its handler back; this process is
         # done: a Ctrl-C while Python shuts down (which restores SIGINT's default, killing the
         # process with -2) is ignored

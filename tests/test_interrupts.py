@@ -32,10 +32,12 @@ INTERRUPTED = "sc2data: interrupted; rerun the same command to resume"
 pytestmark = pytest.mark.skipif(not Path("/proc/self/maps").exists(), reason="needs Linux /proc")
 
 
-def _start(args: list[object]) -> subprocess.Popen[str]:
-    """``sc2data ARGS`` in its own session, with SIGINT handled as a terminal's foreground job has
-    it (this test may itself run with SIGINT ignored, as a background job does)."""
-    return subprocess.Popen([sys.executable, "-m", "sc2data.cli", *map(str, args)], cwd=ROOT,
+def _start(args: list[object], module: str = "sc2data.cli",
+           env: dict[str, str] | None = None) -> subprocess.Popen[str]:
+    """``python -m MODULE ARGS`` (``sc2data ARGS``) in its own session, with SIGINT handled as a
+    terminal's foreground job has it (this test may itself run with SIGINT ignored, as a
+    background job does)."""
+    return subprocess.Popen([sys.executable, "-m", module, *map(str, args)], cwd=ROOT, env=env,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
                             start_new_session=True,
                             preexec_fn=lambda: signal.signal(  # noqa: PLW1509 - one signal() call
@@ -77,6 +79,11 @@ def _interrupted(proc: subprocess.Popen[str], *gaps: float) -> str:
         time.sleep(gap)
         if proc.poll() is None:
             proc.send_signal(signal.SIGINT)
+    return _ended_interrupted(proc)
+
+
+def _ended_interrupted(proc: subprocess.Popen[str]) -> str:
+    """Wait for ``proc``; asserts exit 130, the one line and no traceback; returns stderr."""
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, err
     assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
@@ -115,3 +122,28 @@ def test_ctrl_c_twice_while_workers_play(tmp_path: Path, gap: float) -> None:
     assert not (out / "index.parquet").exists()
     assert exit_code(*ROLLOUT, "--out", out) == 0
     assert verify(out) == []
+
+
+INSIDE_A_STRING = """
+import os, signal, threading
+
+import sc2data.cli
+
+
+def _run(argv):
+    threading.Timer(0.2, os.kill, (os.getpid(), signal.SIGINT)).start()
+    exec("while True: pass")  # the Ctrl-C lands in code compiled from a string
+
+
+sc2data.cli._run = _run
+sc2data.cli.main()
+"""
+
+
+def test_ctrl_c_inside_code_compiled_from_a_string(tmp_path: Path) -> None:
+    """A ``KeyboardInterrupt`` that passes through ``exec`` or ``eval`` of a string, as the
+    methods dataclasses and namedtuples make do, leaves a flag in CPython that makes
+    ``python -m`` end the process by SIGINT (status -2) after the command exited 130."""
+    (tmp_path / "inside_a_string.py").write_text(INSIDE_A_STRING)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(ROOT)])}
+    _ended_interrupted(_start([], module="inside_a_string", env=env))  # it sends its own

@@ -68,6 +68,18 @@ FULL = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS)
 """The errors of a write that the disk refused: full, over quota or read-only."""
 
 
+def one_line(e: BaseException) -> str:
+    """An exception as the one line a failed worker or task reports: a user error as it is, a
+    write the disk refused as its errno's text and what to do (HDF5's own message runs over
+    several lines), anything else by type and first line."""
+    if isinstance(e, Sc2DataError):
+        return str(e)
+    if isinstance(e, OSError) and e.errno in FULL:
+        return f"{reason(e)}; free some space, then rerun the same command to resume"
+    first = (str(e).strip().splitlines() or [""])[0]
+    return f"{type(e).__name__}: {first}" if first else type(e).__name__
+
+
 @contextlib.contextmanager
 def writing(what: str, remedy: str) -> Iterator[None]:
     """Turn a write the disk refuses (:data:`FULL`) inside the block into one line about

@@ -20,8 +20,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from sc2data.errors import Sc2DataError, reason
-from sc2data.files import FULL, PARTIAL, FolderLock
+from sc2data.errors import Sc2DataError
+from sc2data.files import PARTIAL, FolderLock, one_line
 
 Report = Callable[[int], None]
 """Called by a job with the number of steps played since its last call."""
@@ -52,9 +52,7 @@ def _worker(tasks: Any, results: Any, job: Job, out: Path, what: str, parent: in
             try:
                 result = job(i, report)
             except BaseException as e:  # noqa: BLE001 - reported to the parent, which fails
-                results.put(("error", i, str(e) if isinstance(e, Sc2DataError) else reason(e)
-                             if isinstance(e, OSError) and e.errno in FULL
-                             else f"{type(e).__name__}: {e}"))
+                results.put(("error", i, one_line(e)))
                 return
             results.put(("done", i, result))
 

@@ -1,9 +1,13 @@
-"""Shared fixtures and markers."""
+"""Shared fixtures (a small filesystem to fill) and markers."""
 
 from __future__ import annotations
 
-import pytest
+import os
+import subprocess
+from collections.abc import Iterator
+from pathlib import Path
 
+import pytest
 
 LONGEST_FIRST = ("tests/scaleout/", "tests/test_docs.py", "tests/test_kill_anywhere.py",
                  "tests/pairs/test_pairset.py")
@@ -31,3 +35,26 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     for item in items:
         if "sc2" in item.keywords:
             item.add_marker(skip)
+
+
+@pytest.fixture
+def fs(tmp_path: Path) -> Iterator[Path]:
+    """A 64 MB tmpfs of its own (a disk to fill: root only, skipped elsewhere), unmounted
+    afterwards."""
+    where = tmp_path / "fs"
+    where.mkdir()
+    p = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64m", "tmpfs", str(where)],
+                       capture_output=True, text=True, check=False)
+    if p.returncode:
+        pytest.skip(f"cannot mount a small tmpfs to fill (needs root): {p.stderr.strip()}")
+    yield where
+    subprocess.run(["umount", "-l", str(where)], check=False)
+
+
+def leave_free(fs: Path, free: int) -> Path:
+    """Fill ``fs`` with a ballast file so that about ``free`` bytes stay free."""
+    st = os.statvfs(fs)
+    ballast = fs / "ballast"
+    with open(ballast, "wb") as f:
+        os.posix_fallocate(f.fileno(), 0, st.f_bavail * st.f_frsize - free)
+    return ballast

@@ -9,11 +9,9 @@ filled with a ballast file to leave about half the space the command needs.
 from __future__ import annotations
 
 import json
-import os
 import shutil
 import subprocess
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 
 import pyarrow.parquet as pq
@@ -22,6 +20,7 @@ import pytest
 from sc2data.data.audit import verify
 from sc2data.files import sha256_file
 from tests.cli import exit_code
+from tests.conftest import leave_free
 
 ROOT = Path(__file__).resolve().parents[1]
 RECIPE = """name = "tiny"
@@ -67,28 +66,6 @@ def ref(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return root
 
 
-@pytest.fixture
-def fs(tmp_path: Path) -> Iterator[Path]:
-    """A 64 MB tmpfs of its own, unmounted afterwards."""
-    where = tmp_path / "fs"
-    where.mkdir()
-    p = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64m", "tmpfs", str(where)],
-                       capture_output=True, text=True, check=False)
-    if p.returncode:
-        pytest.skip(f"cannot mount a small tmpfs to fill (needs root): {p.stderr.strip()}")
-    yield where
-    subprocess.run(["umount", "-l", str(where)], check=False)
-
-
-def _leave(fs: Path, free: int) -> Path:
-    """Fill ``fs`` with a ballast file so that about ``free`` bytes stay free."""
-    st = os.statvfs(fs)
-    ballast = fs / "ballast"
-    with open(ballast, "wb") as f:
-        os.posix_fallocate(f.fileno(), 0, st.f_bavail * st.f_frsize - free)
-    return ballast
-
-
 def _fails_in_one_line(*args: object) -> None:
     """``sc2data ARGS`` in its own process (a crash shows as its exit status) fails in one line."""
     p = subprocess.run([sys.executable, "-m", "sc2data.cli", *map(str, args)], cwd=ROOT,
@@ -103,7 +80,7 @@ def _fails_in_one_line(*args: object) -> None:
 def test_rollout(ref: Path, fs: Path, workers: str) -> None:
     """In one process, and in two worker processes (the parent reports the worker's error)."""
     args = [*ROLLOUT, "--recipe", ref / "tiny.toml", "--out", fs / "data", "--workers", workers]
-    ballast = _leave(fs, _bytes(ref / "data") // 2)
+    ballast = leave_free(fs, _bytes(ref / "data") // 2)
     _fails_in_one_line(*args)
     data = fs / "data"
     assert not (data / "index.parquet").exists() and not list(data.glob("*.partial"))
@@ -116,15 +93,18 @@ def test_rollout(ref: Path, fs: Path, workers: str) -> None:
         assert sha256_file(data / p.name) == sha256_file(p)
 
 
-def test_label(ref: Path, fs: Path) -> None:
+@pytest.mark.parametrize("workers", ["1", "2"])
+def test_label(ref: Path, fs: Path, workers: str) -> None:
+    """In one process, and in two worker processes (each writes its shards' label parts)."""
     data = fs / "data"
     shutil.copytree(ref / "data", data, ignore=shutil.ignore_patterns("*label*"))
     need = _bytes(ref / "data") - _bytes(data)
-    ballast = _leave(fs, need // 2)
-    _fails_in_one_line("label", data, "--no-progress")
+    ballast = leave_free(fs, need // 2)
+    args = ["label", data, "--workers", workers, "--no-progress"]
+    _fails_in_one_line(*args)
     assert not (data / "labels.sha256").exists()
     ballast.unlink()
-    assert exit_code("label", data, "--no-progress") == 0
+    assert exit_code(*args) == 0
     assert verify(data) == []
     for name in ("labels.parquet", "stack_labels.parquet"):
         assert pq.read_table(data / name).equals(pq.read_table(ref / "data" / name))
@@ -133,7 +113,7 @@ def test_label(ref: Path, fs: Path) -> None:
 def test_pair(ref: Path, fs: Path) -> None:
     args = ["pair", ref / "tiny.toml", "--data", ref / "data", "--out", fs / "pairs",
             "--no-progress"]
-    ballast = _leave(fs, _bytes(ref / "pairs") // 2)
+    ballast = leave_free(fs, _bytes(ref / "pairs") // 2)
     _fails_in_one_line(*args)
     assert sorted(p.name for p in fs.iterdir()) == [".pairs.lock", "ballast"]
     ballast.unlink()
@@ -144,7 +124,7 @@ def test_pair(ref: Path, fs: Path) -> None:
 
 def test_train(ref: Path, fs: Path) -> None:
     args = ["train", ref / "pairs", "--out", fs / "run", *TRAIN]
-    ballast = _leave(fs, _bytes(ref / "run") // 2)
+    ballast = leave_free(fs, _bytes(ref / "run") // 2)
     _fails_in_one_line(*args)
     state = fs / "run" / "state.json"
     assert not state.exists() or not json.loads(state.read_text())["finished"]

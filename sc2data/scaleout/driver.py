@@ -37,8 +37,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from sc2data.errors import MissingDependencyError, Sc2DataError
+from sc2data.files import one_line
 from sc2data.progress import Bar
-from sc2data.scaleout.tasks import Tracker, describe, label_task, rollout_task
+from sc2data.scaleout.tasks import Tracker, label_task, rollout_task
 
 if TYPE_CHECKING:  # types only: the stages import this module, not the other way round
     from sc2data.data.rollout import AgentFactory, EnvFactory, RolloutConfig, RolloutSummary
@@ -282,8 +283,8 @@ class _Driver:
             cause = e.cause if e.cause is not None else e
             if not isinstance(cause, transient_errors()):
                 raise Sc2DataError(f"{self.what} of {task.key} failed: "
-                                   f"{describe(cause)}") from None
-            raise self.give_up(task, f"the instance crashed: {describe(cause)}",
+                                   f"{one_line(cause)}") from None
+            raise self.give_up(task, f"the instance crashed: {one_line(cause)}",
                                task.seen + task.max_retries + 1) from None
         except ray.exceptions.RayError as e:  # Ray retried it as often as allowed
             raise self.give_up(task, _system_failure(ray, e),

@@ -20,8 +20,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from sc2data.errors import Sc2DataError, reason
-from sc2data.files import FULL
+from sc2data.errors import Sc2DataError
+from sc2data.files import one_line
 
 _REPORT_EVERY_S = 0.5
 
@@ -41,18 +41,6 @@ class Reporter:
     def flush(self) -> None:
         self.tracker.add.remote(self.key, self.token, self.pending)
         self.pending, self.sent = 0, time.monotonic()
-
-
-def describe(e: BaseException) -> str:
-    """An exception in one line, as a local run reports it: a write the disk refused as its
-    errno's text and what to do (HDF5's own message runs over several lines), anything else by
-    type and first line."""
-    if isinstance(e, Sc2DataError):
-        return str(e)
-    if isinstance(e, OSError) and e.errno in FULL:
-        return f"{reason(e)}; free some space, then rerun the same command to resume"
-    first = (str(e).strip().splitlines() or [""])[0]
-    return f"{type(e).__name__}: {first}" if first else type(e).__name__
 
 
 def _peak_rss(children: bool) -> dict[str, float]:
@@ -76,7 +64,7 @@ def _attempt(tracker: Any, key: str, work: Callable[[Reporter], None],
     try:
         work(report)
     except BaseException as e:
-        tracker.fail.remote(key, token, describe(e))
+        tracker.fail.remote(key, token, one_line(e))
         raise
     finally:
         report.flush()

@@ -20,15 +20,16 @@ import pyarrow.parquet as pq
 import pytest
 
 import sc2data
+from sc2data.data.audit import verify
 from sc2data.data.dataset import INDEX
 from sc2data.data.rollout import RolloutConfig, _make_agent, episode_seeds, rollout
 from sc2data.errors import Sc2DataError
 from sc2data.files import sha256_file
 from sc2data.labels.label import label_dataset
-from sc2data.labels.store import STACKS_FILE
+from sc2data.labels.store import LABELS_FILE, STACKS_FILE, SUMS_FILE
 from sc2data.scaleout.driver import RayOptions, label_on_ray, rollout_on_ray
 from tests.cli import assert_one_line_error, run_cli
-from tests.test_disk_full import _leave, fs  # noqa: F401  (fs: a small tmpfs, a fixture)
+from tests.conftest import leave_free
 
 CONFIG = RolloutConfig(env="sim", agent="reduced-random", episodes=4, episodes_per_shard=1,
                        max_steps=40, seed=5)
@@ -369,7 +370,7 @@ def test_a_full_disk_fails_the_run_in_one_line_and_a_rerun_resumes(
     """Ray tasks writing to a filesystem that fills part-way: one line naming the full disk,
     nothing that looks complete, and with space again the rerun gives the local run's bytes."""
     out = fs / "data"
-    ballast = _leave(fs, sum(p.stat().st_size for p in reference.glob("shard-*.h5")) // 2)
+    ballast = leave_free(fs, sum(p.stat().st_size for p in reference.glob("shard-*.h5")) // 2)
     with pytest.raises(Sc2DataError) as caught:
         rollout_on_ray(CONFIG, out, RayOptions(retries=1, timeout_s=60), progress=False)
     message = str(caught.value)
@@ -380,3 +381,27 @@ def test_a_full_disk_fails_the_run_in_one_line_and_a_rerun_resumes(
     ballast.unlink()
     rollout_on_ray(CONFIG, out, RayOptions(), progress=False)
     assert_same_data(out, reference)
+
+
+@pytest.mark.slow
+def test_a_full_disk_fails_a_label_in_one_line_and_a_rerun_resumes(
+        ray_instance: Any, reference: Path, fs: Path, tmp_path: Path) -> None:
+    """Label tasks writing their parts to a filesystem that fills part-way: one line, no label
+    checksums, and with space again the rerun gives the local labels."""
+    local = Path(shutil.copytree(reference, tmp_path / "local"))
+    label_dataset(local, progress=False)
+    data = Path(shutil.copytree(reference, fs / "data"))
+    need = sum(p.stat().st_size for p in local.rglob("*") if p.is_file()) - \
+        sum(p.stat().st_size for p in data.rglob("*") if p.is_file())
+    ballast = leave_free(fs, need // 2)
+    with pytest.raises(Sc2DataError) as caught:
+        label_on_ray(data, RayOptions(retries=1, timeout_s=60), progress=False)
+    message = str(caught.value)
+    assert "\n" not in message and "No space left on device" in message, message
+    assert not (data / SUMS_FILE).exists()
+    ballast.unlink()
+    label_on_ray(data, RayOptions(), progress=False)
+    assert verify(data) == []
+    for name in (LABELS_FILE, STACKS_FILE):
+        a, b = (pq.read_table(d / name).replace_schema_metadata(None) for d in (local, data))
+        assert a.equals(b), name

@@ -11,17 +11,21 @@ so for each batch it is rebuilt to read only the channels that batch needs:
   ``conv(x) = Σ_{c≠b} (W_c − W_b) ∗ x_c + Σ W_b``, the constant folded into the bias; a layer
   that shows one id in the whole batch vanishes;
 - a scalar layer constant over the batch (the simulator's flat height map) folds into the bias;
+- a layer showing the same image in every stack and frame (a map's terrain, its fog, the
+  minimap's camera box) adds the same map to the convolution's output every time: that share is
+  computed once, on one frame, and cached by the image's bytes;
 - a cell's shares and means are pixel counts and sums, which the image holds, with the 1/p² and
   the pysc2 scale folded into the kernel instead.
 
-Each channel's cell counts come from one comparison and p² strided adds in numpy; no float image
-of every channel is ever built. Distances agree with the training path's to float rounding
+Each channel's cell counts come from one comparison and a few adds of 64-bit words, eight pixels
+to a word (``_cell_counts``); no float image of every channel is ever built. Distances agree with the training path's to float rounding
 (tests/model/test_infer.py: within 1e-5); measured in BENCHMARKS.md ("The MEM as a reward").
 The other layers of the towers, the non-spatial branch and the head are the model's own modules.
 """
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -73,9 +77,43 @@ class _Group:
             lut = None if np.array_equal(seg, np.arange(len(seg))) else seg.astype(
                 np.uint8 if n <= 256 else np.int16)
             self.cats.append(_Categorical(key, n_s + int(inp.first[i]), n, lut))
+        self.keys = [k for k, _, _ in self.scalars] + [c.key for c in self.cats]
+        self._cache: dict[tuple[str, str, bytes], torch.Tensor] = {}
 
     def __call__(self, arrays: Mapping[str, np.ndarray]) -> torch.Tensor:
         """Stacks by key ``(B, 2, H, W)`` → the tower's output ``(B, features)``."""
+        b, _, hh, ww = arrays[self.keys[0]].shape
+        p = self.pool
+        if hh % p or ww % p:
+            raise Sc2DataError(f"a layer is {hh}×{ww}, not divisible by the pool size {p}")
+        varying: dict[str, np.ndarray] = {}
+        constant: torch.Tensor | None = None  # the layers the same in every stack and frame
+        for key in self.keys:
+            x = arrays[key]
+            if _same_in_every_frame(x):
+                c = self._constant(key, x[0, 0])
+                constant = c if constant is None else constant + c
+            else:
+                varying[key] = x
+        y = self._first_conv(varying, (b, hh, ww))
+        return self.rest(y if constant is None else y + constant)
+
+    def _constant(self, key: str, frame: np.ndarray) -> torch.Tensor:
+        """The first convolution's share ``(1, C, h, w)`` of a layer showing ``frame`` in every
+        stack and both frames (a map's height, its fog), cached by content."""
+        cache_key = (key, frame.dtype.str, frame.tobytes())
+        out = self._cache.get(cache_key)
+        if out is None:
+            if len(self._cache) >= _CACHE_SIZE:
+                self._cache.clear()
+            one = np.broadcast_to(frame, (1, 2, *frame.shape))
+            out = self._first_conv({key: one}, (1, *frame.shape), bias=False)
+            self._cache[cache_key] = out
+        return out
+
+    def _first_conv(self, arrays: Mapping[str, np.ndarray], shape: tuple[int, int, int],
+                    bias: bool = True) -> torch.Tensor:
+        """The first convolution over the layers in ``arrays`` (the others read as zero)."""
         p = self.pool
         # per kept channel: its source (B, 2, H, W), the id it counts (None: a scalar's sum), its
         # column in a frame's block, the column subtracted from it (its layer's base; -1: none)
@@ -84,6 +122,8 @@ class _Group:
         fold: list[int] = []  # columns of constant inputs, and their value
         fold_value: list[float] = []
         for key, j, inv_scale in self.scalars:
+            if key not in arrays:
+                continue
             x = arrays[key]
             lo, hi = x.min(), x.max()
             if lo == hi:  # constant (usually 0): into the bias
@@ -93,6 +133,8 @@ class _Group:
                 continue
             jobs.append((x, None, j, -1, inv_scale / p ** 2))
         for cat in self.cats:
+            if cat.key not in arrays:
+                continue
             u = arrays[cat.key]
             if cat.lut is not None:
                 u = np.take(cat.lut, u)
@@ -102,24 +144,23 @@ class _Group:
             fold_value.append(1.0)
             jobs += [(u, int(c), cat.col + int(c), cat.col + base, 1.0 / p ** 2)
                      for c in present[1:]]
-        b, _, hh, ww = arrays[(self.scalars[0][0] if self.scalars else self.cats[0].key)].shape
-        if hh % p or ww % p:
-            raise Sc2DataError(f"a layer is {hh}×{ww}, not divisible by the pool size {p}")
+        b, hh, ww = shape
         h, w, n = hh // p, ww // p, max(len(jobs), 1)
         image = (np.empty if jobs else np.zeros)((b, 2, n, h, w), np.float32)  # channel t·n + i
         for i, (src, c, *_) in enumerate(jobs):
             if c is None:
                 _cell_sums(src, p, np.float32, image[:, :, i])
             else:
-                _cell_sums((src == c).view(np.uint8), p, np.uint8, image[:, :, i])
+                _cell_counts(src == c, p, image[:, :, i])
         x = torch.from_numpy(image).view(b, 2 * n, h, w)
-        return self.rest(self._conv(x, jobs, fold, fold_value))
+        return self._conv(x, jobs, fold, fold_value, with_bias=bias)
 
     def _conv(self, x: torch.Tensor, jobs: list[tuple[np.ndarray, int | None, int, int, float]],
-              fold: list[int], fold_value: list[float]) -> torch.Tensor:
-        """The first convolution on the kept channels, constants in the bias."""
+              fold: list[int], fold_value: list[float], with_bias: bool = True) -> torch.Tensor:
+        """The first convolution on the kept channels, constants in the bias (``with_bias``:
+        the layer's own bias too)."""
         c, w = self.per_frame, self.weight
-        bias = self.bias.clone()
+        bias = self.bias.clone() if with_bias else torch.zeros_like(self.bias)
         if fold:
             cols = torch.tensor([t * c + f for t in (0, 1) for f in fold])
             vals = torch.tensor(fold_value * 2, dtype=torch.float32)
@@ -139,6 +180,15 @@ def _scale(inp: SpatialInput, i: int) -> int:
     """The number of raw ids of categorical layer ``i`` (its segment of the lookup table)."""
     offsets = list(inp._raw_offsets) + [len(inp._lut)]
     return int(offsets[i + 1] - offsets[i])
+
+
+_CACHE_SIZE = 256
+"""Constant layers' first-convolution shares kept per tower (a few per map in practice)."""
+
+
+def _same_in_every_frame(x: np.ndarray) -> bool:
+    """``x`` ``(B, 2, H, W)`` shows the same image in every stack and frame."""
+    return x[0, 0].tobytes() == x[-1, -1].tobytes() and bool((x == x[0, 0]).all())
 
 
 _BITS = ((8, np.uint8), (16, np.uint16), (32, np.uint32), (64, np.uint64))
@@ -168,6 +218,32 @@ def _cell_sums(x: np.ndarray, p: int, dtype: type, out: np.ndarray) -> None:
     np.add(rows[..., 0::p], rows[..., 1::p], out=out)
     for d in range(2, p):
         out += rows[..., d::p]
+
+
+_LANES = {2: (np.uint16, 0x00FF00FF00FF00FF), 4: (np.uint32, 0x000000FF000000FF)}
+"""Per pool size: the lane holding a cell's count in a 64-bit word, and the mask of its byte."""
+
+
+def _cell_counts(mask: np.ndarray, p: int, out: np.ndarray) -> None:
+    """``(B, 2, H, W)`` booleans → ``out``: the number set in each p×p cell.
+
+    Eight pixels at a time as the bytes of one 64-bit word: adding rows adds bytewise (a byte
+    counts at most p² ≤ 16, so it never carries into the next), then shifted adds sum each p
+    neighbouring bytes into the first of them, which the mask keeps as the low byte of a lane."""
+    if p not in _LANES or mask.shape[-1] % 8 or sys.byteorder != "little":
+        _cell_sums(mask.view(np.uint8), p, np.uint8, out)
+        return
+    words = np.ascontiguousarray(mask).view(np.uint64)  # (B, 2, H, W/8)
+    rows = np.add(words[:, :, 0::p], words[:, :, 1::p])
+    for d in range(2, p):
+        rows += words[:, :, d::p]
+    shift = 8
+    while shift < 8 * p:
+        rows += rows >> np.uint64(shift)
+        shift *= 2
+    lane, keep = _LANES[p]
+    rows &= np.uint64(keep)
+    np.copyto(out, rows.view(lane))
 
 
 class FastStateEncoder:

@@ -11,7 +11,7 @@ torch = pytest.importorskip("torch")
 
 from sc2data import load_model  # noqa: E402
 from sc2data._pysc2 import units  # noqa: E402
-from sc2data.model.infer import FastStateEncoder  # noqa: E402
+from sc2data.model.infer import FastStateEncoder, _cell_counts  # noqa: E402
 from sc2data.model.mem import MEM, ModelConfig, model_inputs, value_tables  # noqa: E402
 from sc2data.model.reward import MEMScorer  # noqa: E402
 from sc2data.pairs.loader import PairSet  # noqa: E402
@@ -58,7 +58,7 @@ def test_trained_model_gives_the_reference_distances_at_any_batch_size(run: Path
 
 
 @pytest.mark.parametrize("mode", ["onehot", "embed"])
-@pytest.mark.parametrize("pool", [1, 2])
+@pytest.mark.parametrize("pool", [1, 2, 4])
 def test_same_function_on_the_paper_layers_with_constant_unseen_and_single_id_inputs(
         mode: str, pool: int) -> None:
     schema = Schema.paper()
@@ -76,12 +76,29 @@ def test_same_function_on_the_paper_layers_with_constant_unseen_and_single_id_in
     odd["screen/player_relative"][:] = 1  # one id in the whole batch
     variants["unseen, constant, single"] = odd
     variants["blank"] = {k: np.zeros_like(v) for k, v in arrays.items()}  # nothing varies
+    same = {k: v.copy() for k, v in arrays.items()}  # one map's layers in every stack and frame
+    for key in ("screen/height_map", "screen/visibility_map", "minimap/camera",
+                "minimap/player_relative"):
+        same[key][:] = arrays[key][2, 1]
+    variants["the same maps everywhere"] = same
     with torch.inference_mode():
-        for name, a in variants.items():
+        for name, a in [*variants.items(), *variants.items()]:  # twice: the second from cache
             for size in (1, 5, len(EVENTS)):
                 part = {k: v[:size] for k, v in a.items()}
                 np.testing.assert_allclose(enc(part).numpy(), reference(model, part),
                                            atol=1e-5, rtol=0, err_msg=f"{name}, batch {size}")
+    assert all(g._cache for _, g in enc.groups)  # the constant layers were cached
+
+
+@pytest.mark.parametrize("pool", [1, 2, 3, 4])
+def test_cell_counts_count_every_p_by_p_cell(pool: int) -> None:
+    rng = np.random.default_rng(pool)
+    for mask in (rng.random((3, 2, 48, 48)) < 0.4, np.ones((3, 2, 48, 48), bool),
+                 np.zeros((3, 2, 48, 48), bool)):
+        out = np.full((3, 2, 48 // pool, 48 // pool), -1, np.float32)
+        _cell_counts(mask, pool, out)
+        want = mask.reshape(3, 2, 48 // pool, pool, 48 // pool, pool).sum((3, 5))
+        np.testing.assert_array_equal(out, want)
 
 
 def test_scalar_encoding_keeps_the_training_path() -> None:

@@ -17,9 +17,10 @@ so for each batch it is rebuilt to read only the channels that batch needs:
 - a cell's shares and means are pixel counts and sums, which the image holds, with the 1/p² and
   the pysc2 scale folded into the kernel instead.
 
-Each channel's cell counts come from one comparison and a few adds of 64-bit words, eight pixels
-to a word (``_cell_counts``); no float image of every channel is ever built. Distances agree with the training path's to float rounding
-(tests/model/test_infer.py: within 1e-5); measured in BENCHMARKS.md ("The MEM as a reward").
+Each channel's cell counts come from one comparison and a few adds of 64-bit words, four or eight
+pixels to a word (``_cell_totals``); no float image of every channel is ever built. Distances
+agree with the training path's to float rounding (tests/model/test_infer.py: within 1e-5);
+measured in BENCHMARKS.md ("The MEM as a reward").
 The other layers of the towers, the non-spatial branch and the head are the model's own modules.
 """
 
@@ -116,9 +117,9 @@ class _Group:
         """The first convolution over the layers in ``arrays`` (the others read as zero)."""
         p = self.pool
         # per kept channel: its source (B, 2, H, W), the id it counts (None: a scalar's sum), its
-        # column in a frame's block, the column subtracted from it (its layer's base; -1: none)
-        # and the factor folded into the kernel
-        jobs: list[tuple[np.ndarray, int | None, int, int, float]] = []
+        # column in a frame's block, the column subtracted from it (its layer's base; -1: none),
+        # the factor folded into the kernel, and the largest value it sums (-1: some negative)
+        jobs: list[tuple[np.ndarray, int | None, int, int, float, int]] = []
         fold: list[int] = []  # columns of constant inputs, and their value
         fold_value: list[float] = []
         for key, j, inv_scale in self.scalars:
@@ -131,7 +132,7 @@ class _Group:
                     fold.append(j)
                     fold_value.append(float(hi) * inv_scale)
                 continue
-            jobs.append((x, None, j, -1, inv_scale / p ** 2))
+            jobs.append((x, None, j, -1, inv_scale / p ** 2, int(hi) if lo >= 0 else -1))
         for cat in self.cats:
             if cat.key not in arrays:
                 continue
@@ -142,20 +143,20 @@ class _Group:
             base = int(present[0])
             fold.append(cat.col + base)
             fold_value.append(1.0)
-            jobs += [(u, int(c), cat.col + int(c), cat.col + base, 1.0 / p ** 2)
+            jobs += [(u, int(c), cat.col + int(c), cat.col + base, 1.0 / p ** 2, 1)
                      for c in present[1:]]
         b, hh, ww = shape
         h, w, n = hh // p, ww // p, max(len(jobs), 1)
         image = (np.empty if jobs else np.zeros)((b, 2, n, h, w), np.float32)  # channel t·n + i
-        for i, (src, c, *_) in enumerate(jobs):
-            if c is None:
+        for i, (src, c, *_, hi) in enumerate(jobs):
+            if hi < 0:  # negative values
                 _cell_sums(src, p, np.float32, image[:, :, i])
             else:
-                _cell_counts(src == c, p, image[:, :, i])
+                _cell_totals(src if c is None else src == c, p, hi, image[:, :, i])
         x = torch.from_numpy(image).view(b, 2 * n, h, w)
         return self._conv(x, jobs, fold, fold_value, with_bias=bias)
 
-    def _conv(self, x: torch.Tensor, jobs: list[tuple[np.ndarray, int | None, int, int, float]],
+    def _conv(self, x: torch.Tensor, jobs: list[tuple[np.ndarray, int | None, int, int, float, int]],
               fold: list[int], fold_value: list[float], with_bias: bool = True) -> torch.Tensor:
         """The first convolution on the kept channels, constants in the bias (``with_bias``:
         the layer's own bias too)."""
@@ -220,30 +221,34 @@ def _cell_sums(x: np.ndarray, p: int, dtype: type, out: np.ndarray) -> None:
         out += rows[..., d::p]
 
 
-_LANES = {2: (np.uint16, 0x00FF00FF00FF00FF), 4: (np.uint32, 0x000000FF000000FF)}
-"""Per pool size: the lane holding a cell's count in a 64-bit word, and the mask of its byte."""
+def _cell_totals(x: np.ndarray, p: int, hi: int, out: np.ndarray) -> None:
+    """``(B, 2, H, W)`` non-negative integers (booleans: counts) at most ``hi`` → ``out``: the
+    sum over each p×p cell.
 
-
-def _cell_counts(mask: np.ndarray, p: int, out: np.ndarray) -> None:
-    """``(B, 2, H, W)`` booleans → ``out``: the number set in each p×p cell.
-
-    Eight pixels at a time as the bytes of one 64-bit word: adding rows adds bytewise (a byte
-    counts at most p² ≤ 16, so it never carries into the next), then shifted adds sum each p
-    neighbouring bytes into the first of them, which the mask keeps as the low byte of a lane."""
-    if p not in _LANES or mask.shape[-1] % 8 or sys.byteorder != "little":
-        _cell_sums(mask.view(np.uint8), p, np.uint8, out)
+    Several pixels at a time, as the lanes of one 64-bit word: 8-bit lanes where a cell's sum
+    fits in a byte, else 16-bit ones. Adding rows adds lane by lane (no lane carries into the
+    next), then shifted adds sum each p neighbouring lanes into the first, which a mask keeps;
+    the word read as p-lane integers is then the cells' sums. Other sizes and types: plain
+    strided sums (``_cell_sums``)."""
+    total = hi * p * p
+    lane = 8 if total < 1 << 8 else 16 if total < 1 << 16 else 0
+    if (p not in (2, 4) or not lane or x.dtype.kind not in "biu" or sys.byteorder != "little"
+            or (x.shape[-1] * lane) % 64):
+        _cell_sums(x, p, np.float32, out)
         return
-    words = np.ascontiguousarray(mask).view(np.uint64)  # (B, 2, H, W/8)
+    narrow = np.uint8 if lane == 8 else np.uint16
+    x = x.view(np.uint8) if x.dtype == np.bool_ else x
+    words = np.ascontiguousarray(x, dtype=narrow).view(np.uint64)  # (B, 2, H, W·lane/64)
     rows = np.add(words[:, :, 0::p], words[:, :, 1::p])
     for d in range(2, p):
         rows += words[:, :, d::p]
-    shift = 8
-    while shift < 8 * p:
+    shift = lane
+    while shift < lane * p:
         rows += rows >> np.uint64(shift)
         shift *= 2
-    lane, keep = _LANES[p]
-    rows &= np.uint64(keep)
-    np.copyto(out, rows.view(lane))
+    group = lane * p  # bits of one cell's p lanes
+    rows &= np.uint64(sum(((1 << lane) - 1) << g for g in range(0, 64, group)))
+    np.copyto(out, rows.view(f"<u{group // 8}"))
 
 
 class FastStateEncoder:

@@ -11,7 +11,7 @@ torch = pytest.importorskip("torch")
 
 from sc2data import load_model  # noqa: E402
 from sc2data._pysc2 import units  # noqa: E402
-from sc2data.model.infer import FastStateEncoder, _cell_counts  # noqa: E402
+from sc2data.model.infer import FastStateEncoder, _cell_totals  # noqa: E402
 from sc2data.model.mem import MEM, ModelConfig, model_inputs, value_tables  # noqa: E402
 from sc2data.model.reward import MEMScorer  # noqa: E402
 from sc2data.pairs.loader import PairSet  # noqa: E402
@@ -91,14 +91,19 @@ def test_same_function_on_the_paper_layers_with_constant_unseen_and_single_id_in
 
 
 @pytest.mark.parametrize("pool", [1, 2, 3, 4])
-def test_cell_counts_count_every_p_by_p_cell(pool: int) -> None:
+def test_cell_totals_sum_every_p_by_p_cell(pool: int) -> None:
+    """Booleans, and integers whose cell sums need 8-bit, 16-bit or (past 65,535) no lanes."""
     rng = np.random.default_rng(pool)
-    for mask in (rng.random((3, 2, 48, 48)) < 0.4, np.ones((3, 2, 48, 48), bool),
-                 np.zeros((3, 2, 48, 48), bool)):
+    shape = (3, 2, 48, 48)
+    cases = [rng.random(shape) < 0.4, np.ones(shape, bool), np.zeros(shape, bool),
+             rng.integers(0, 16, shape).astype(np.uint8), np.full(shape, 255, np.uint8),
+             rng.integers(0, 4096, shape).astype(np.uint16),
+             np.full(shape, 65535, np.uint16), rng.integers(0, 9, shape).astype(np.int32)]
+    for x in cases:
         out = np.full((3, 2, 48 // pool, 48 // pool), -1, np.float32)
-        _cell_counts(mask, pool, out)
-        want = mask.reshape(3, 2, 48 // pool, pool, 48 // pool, pool).sum((3, 5))
-        np.testing.assert_array_equal(out, want)
+        _cell_totals(x, pool, int(x.max()), out)
+        want = x.astype(np.int64).reshape(3, 2, 48 // pool, pool, 48 // pool, pool).sum((3, 5))
+        np.testing.assert_array_equal(out, want, err_msg=f"{x.dtype}, max {x.max()}")
 
 
 def test_scalar_encoding_keeps_the_training_path() -> None:

@@ -79,7 +79,7 @@ class _Group:
                 np.uint8 if n <= 256 else np.int16)
             self.cats.append(_Categorical(key, n_s + int(inp.first[i]), n, lut))
         self.keys = [k for k, _, _ in self.scalars] + [c.key for c in self.cats]
-        self._cache: dict[tuple[str, str, bytes], torch.Tensor] = {}
+        self._cache: dict[tuple[str, str, tuple[int, ...], bytes], torch.Tensor] = {}
 
     def __call__(self, arrays: Mapping[str, np.ndarray]) -> torch.Tensor:
         """Stacks by key ``(B, 2, H, W)`` → the tower's output ``(B, features)``."""
@@ -102,7 +102,7 @@ class _Group:
     def _constant(self, key: str, frame: np.ndarray) -> torch.Tensor:
         """The first convolution's share ``(1, C, h, w)`` of a layer showing ``frame`` in every
         stack and both frames (a map's height, its fog), cached by content."""
-        cache_key = (key, frame.dtype.str, frame.tobytes())
+        cache_key = (key, frame.dtype.str, frame.shape, frame.tobytes())
         out = self._cache.get(cache_key)
         if out is None:
             if len(self._cache) >= _CACHE_SIZE:

@@ -12,8 +12,8 @@ so for each batch it is rebuilt to read only the channels that batch needs:
   that shows one id in the whole batch vanishes;
 - a scalar layer constant over the batch (the simulator's flat height map) folds into the bias;
 - a layer showing the same image in every stack and frame (a map's terrain, its fog, the
-  minimap's camera box) adds the same map to the convolution's output every time: that share is
-  computed once, on one frame, and cached by the image's bytes;
+  minimap's camera box) adds the same map to the convolution's output every time: once an image
+  has come twice, that share is computed on one frame and cached by the image's bytes;
 - a cell's shares and means are pixel counts and sums, which the image holds, with the 1/p² and
   the pysc2 scale folded into the kernel instead.
 
@@ -80,6 +80,7 @@ class _Group:
             self.cats.append(_Categorical(key, n_s + int(inp.first[i]), n, lut))
         self.keys = [k for k, _, _ in self.scalars] + [c.key for c in self.cats]
         self._cache: dict[tuple[str, str, tuple[int, ...], bytes], torch.Tensor] = {}
+        self._seen: set[tuple[str, str, tuple[int, ...], bytes]] = set()
 
     def __call__(self, arrays: Mapping[str, np.ndarray]) -> torch.Tensor:
         """Stacks by key ``(B, 2, H, W)`` → the tower's output ``(B, features)``."""
@@ -91,20 +92,27 @@ class _Group:
         constant: torch.Tensor | None = None  # the layers the same in every stack and frame
         for key in self.keys:
             x = arrays[key]
-            if _same_in_every_frame(x):
-                c = self._constant(key, x[0, 0])
-                constant = c if constant is None else constant + c
-            else:
+            c = self._constant(key, x[0, 0]) if _same_in_every_frame(x) else None
+            if c is None:
                 varying[key] = x
+            else:
+                constant = c if constant is None else constant + c
         y = self._first_conv(varying, (b, hh, ww))
         return self.rest(y if constant is None else y + constant)
 
-    def _constant(self, key: str, frame: np.ndarray) -> torch.Tensor:
+    def _constant(self, key: str, frame: np.ndarray) -> torch.Tensor | None:
         """The first convolution's share ``(1, C, h, w)`` of a layer showing ``frame`` in every
-        stack and both frames (a map's height, its fog), cached by content."""
+        stack and both frames (a map's height, its fog), cached by content; None the first time
+        an image is seen (it may never come again: at batch 1 a layer often shows the same in
+        both frames), when it goes with the other layers."""
         cache_key = (key, frame.dtype.str, frame.shape, frame.tobytes())
         out = self._cache.get(cache_key)
         if out is None:
+            if cache_key not in self._seen:
+                if len(self._seen) >= _CACHE_SIZE:
+                    self._seen.clear()
+                self._seen.add(cache_key)
+                return None
             if len(self._cache) >= _CACHE_SIZE:
                 self._cache.clear()
             one = np.broadcast_to(frame, (1, 2, *frame.shape))
@@ -184,7 +192,8 @@ def _scale(inp: SpatialInput, i: int) -> int:
 
 
 _CACHE_SIZE = 256
-"""Constant layers' first-convolution shares kept per tower (a few per map in practice)."""
+"""Constant layers' first-convolution shares (and images seen once) kept per tower: a few per
+map in practice."""
 
 
 def _same_in_every_frame(x: np.ndarray) -> bool:

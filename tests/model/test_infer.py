@@ -11,7 +11,7 @@ torch = pytest.importorskip("torch")
 
 from sc2data import load_model  # noqa: E402
 from sc2data._pysc2 import units  # noqa: E402
-from sc2data.model.infer import FastStateEncoder, _cell_totals  # noqa: E402
+from sc2data.model.infer import _WORDS_FROM, FastStateEncoder, _cell_totals  # noqa: E402
 from sc2data.model.mem import MEM, ModelConfig, model_inputs, value_tables  # noqa: E402
 from sc2data.model.reward import MEMScorer  # noqa: E402
 from sc2data.pairs.loader import PairSet  # noqa: E402
@@ -81,9 +81,10 @@ def test_same_function_on_the_paper_layers_with_constant_unseen_and_single_id_in
                 "minimap/player_relative"):
         same[key][:] = arrays[key][2, 1]
     variants["the same maps everywhere"] = same
+    variants["24 stacks"] = {k: np.concatenate([v] * 4) for k, v in arrays.items()}  # word-wide
     with torch.inference_mode():
         for name, a in [*variants.items(), *variants.items()]:  # twice: the second from cache
-            for size in (1, 5, len(EVENTS)):
+            for size in (1, 5, len(EVENTS), 4 * len(EVENTS)):
                 part = {k: v[:size] for k, v in a.items()}
                 np.testing.assert_allclose(enc(part).numpy(), reference(model, part),
                                            atol=1e-5, rtol=0, err_msg=f"{name}, batch {size}")
@@ -94,15 +95,16 @@ def test_same_function_on_the_paper_layers_with_constant_unseen_and_single_id_in
 def test_cell_totals_sum_every_p_by_p_cell(pool: int) -> None:
     """Booleans, and integers whose cell sums need 8-bit, 16-bit or (past 65,535) no lanes."""
     rng = np.random.default_rng(pool)
-    shape = (3, 2, 48, 48)
+    shape = (48, 2, 48, 48)  # enough pixels for the word-wide sums
     cases = [rng.random(shape) < 0.4, np.ones(shape, bool), np.zeros(shape, bool),
              rng.integers(0, 16, shape).astype(np.uint8), np.full(shape, 255, np.uint8),
              rng.integers(0, 4096, shape).astype(np.uint16),
              np.full(shape, 65535, np.uint16), rng.integers(0, 9, shape).astype(np.int32)]
+    assert cases[0].size >= _WORDS_FROM
     for x in cases:
-        out = np.full((3, 2, 48 // pool, 48 // pool), -1, np.float32)
+        out = np.full((48, 2, 48 // pool, 48 // pool), -1, np.float32)
         _cell_totals(x, pool, int(x.max()), out)
-        want = x.astype(np.int64).reshape(3, 2, 48 // pool, pool, 48 // pool, pool).sum((3, 5))
+        want = x.astype(np.int64).reshape(48, 2, 48 // pool, pool, 48 // pool, pool).sum((3, 5))
         np.testing.assert_array_equal(out, want, err_msg=f"{x.dtype}, max {x.max()}")
 
 

@@ -57,6 +57,7 @@ def test_binary_or_folder_recipe_is_one_line(tmp_path: Path,
     ("--threads", "-2", "--threads must be at least 1"),
     ("--vocab-size", "0", "--vocab-size must be at least 1"),
     ("--epochs", "0", "--epochs must be at least 1"),
+    ("--conv-channels", "0", "--conv-channels must be at least 1"),
 ])
 def test_bad_train_option_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                       option: str, value: str, needle: str) -> None:

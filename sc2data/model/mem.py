@@ -88,9 +88,10 @@ class ModelConfig:
     """Width of the mutual embedding."""
 
 
-def conv_for(pool: int) -> tuple[tuple[int, int, int], ...]:
-    """The two conv layers for a pool size: 15×15 then 7×7 (pooled) or 6×6 (full) maps at 64×64."""
-    return ((16, 4, 2), (32, 3, 2)) if pool > 1 else ((16, 8, 4), (32, 4, 2))
+def conv_for(pool: int, first: int = 16) -> tuple[tuple[int, int, int], ...]:
+    """The two conv layers for a pool size: 15×15 then 7×7 (pooled) or 6×6 (full) maps at 64×64
+    (``first``: the first one's channels)."""
+    return ((first, 4, 2), (32, 3, 2)) if pool > 1 else ((first, 8, 4), (32, 4, 2))
 
 
 def value_tables(schema: Schema, batches: Iterable[StackBatch], max_table: int

@@ -31,7 +31,7 @@ import os
 import platform
 import random
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import MISSING, asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -100,6 +100,8 @@ class TrainConfig:
     """Categorical layers: ``embed``, ``onehot`` or ``scalar`` (see sc2data.model.mem)."""
     pool: int = 2
     """Spatial layers enter as p×p cell shares (1 = full resolution; see sc2data.model.mem)."""
+    conv_channels: int = 16
+    """Channels of each tower's first convolution (the paper's 16)."""
     window: int = 4
     """Packed blocks (256 stacks each) decoded and shuffled together by the loader (≈ 180 MB of
     decoded stacks per block-window of the paper's 20 layers)."""
@@ -113,7 +115,7 @@ class TrainConfig:
 
     def validate(self) -> None:
         """One-line error naming the first option no run can use."""
-        for name in ("epochs", "batch_size", "pool", "vocab_size", "window"):
+        for name in ("epochs", "batch_size", "pool", "conv_channels", "vocab_size", "window"):
             if getattr(self, name) < 1:
                 raise Sc2DataError(f"--{name.replace('_', '-')} must be at least 1, not "
                                    f"{getattr(self, name)}")
@@ -196,7 +198,7 @@ def train(cfg: TrainConfig) -> Path:
                 tqdm.write(f"{run} is a finished run of these settings; nothing to do")
             return run
         mcfg = M.ModelConfig(categorical=cfg.categorical, pool=cfg.pool,  # type: ignore[arg-type]
-                             conv=M.conv_for(cfg.pool),
+                             conv=M.conv_for(cfg.pool, cfg.conv_channels),
                              text_encoder=cfg.text_encoder)  # type: ignore[arg-type]
         big = [l.key for l in data.schema.layers if l.categorical and l.scale > mcfg.max_table]
         tables = M.value_tables(data.schema, (b for _, b in train_split.blocks(keys=big)) if big
@@ -387,7 +389,10 @@ class RunFinished(Exception):
 def _differs(run: Path, cfg: TrainConfig) -> list[str]:
     """The settings of ``cfg`` that differ from those the run in ``run`` was started with."""
     old, new = read_config(run) or {}, asdict(cfg)
-    return sorted(k for k in new if k not in RESUME_IGNORES and old.get(k) != new[k])
+    # a setting added since the run was started reads as its default
+    default = {f.name: f.default for f in fields(TrainConfig) if f.default is not MISSING}
+    return sorted(k for k in new if k not in RESUME_IGNORES
+                  and old.get(k, default.get(k)) != new[k])
 
 
 def _keep_rows(path: Path, n: int) -> None:

@@ -12,7 +12,7 @@ torch = pytest.importorskip("torch")
 from sc2data import load_model  # noqa: E402
 from sc2data._pysc2 import units  # noqa: E402
 from sc2data.model.infer import _WORDS_FROM, FastStateEncoder, _cell_totals  # noqa: E402
-from sc2data.model.mem import MEM, ModelConfig, model_inputs, value_tables  # noqa: E402
+from sc2data.model.mem import MEM, ModelConfig, conv_for, model_inputs, value_tables  # noqa: E402
 from sc2data.model.reward import MEMScorer  # noqa: E402
 from sc2data.pairs.loader import PairSet  # noqa: E402
 from sc2data.schema import Schema  # noqa: E402
@@ -63,7 +63,8 @@ def test_same_function_on_the_paper_layers_with_constant_unseen_and_single_id_in
         mode: str, pool: int) -> None:
     schema = Schema.paper()
     batch = stacks(schema, EVENTS, seed=1)
-    cfg = ModelConfig(categorical=mode, pool=pool)  # type: ignore[arg-type]
+    conv = conv_for(pool, 24 if pool == 4 else 16)  # and a first convolution of other width
+    cfg = ModelConfig(categorical=mode, pool=pool, conv=conv)  # type: ignore[arg-type]
     torch.manual_seed(0)
     model = MEM(schema, value_tables(schema, [batch], cfg.max_table),
                 np.zeros((4, 5), np.float32), cfg).eval()

@@ -126,6 +126,20 @@ def test_cli_trains_and_refuses_a_used_run_folder(data: Path, tmp_path: Path,
     assert code == 0, err
 
 
+def test_a_setting_added_since_a_run_began_reads_as_its_default(tmp_path: Path) -> None:
+    """A run folder from before ``conv_channels`` existed is not a run of other settings."""
+    from dataclasses import asdict
+
+    from sc2data.model.train import TrainConfig, _differs
+
+    cfg = TrainConfig(data="d", out=str(tmp_path))
+    old = {k: v for k, v in asdict(cfg).items() if k != "conv_channels"}
+    (tmp_path / "config.json").write_text(json.dumps(old))
+    assert _differs(tmp_path, cfg) == []
+    assert _differs(tmp_path, TrainConfig(data="d", out=str(tmp_path), conv_channels=32)) == \
+        ["conv_channels"]
+
+
 def _broken(data: Path, tmp_path: Path, what: str) -> Path:
     import shutil
 

@@ -10,6 +10,8 @@ calls each, after a warm-up; torch's intra-op threads are set with ``torch.set_n
 ``--ref DIR`` also measures another checkout of sc2data (e.g. ``git worktree add --detach DIR
 main``) on the same run, in child processes alternated round by round with this checkout, so
 that both see the same load on a shared machine; it prints both and their ratio.
+``--ref-training-path`` alternates the same way with this checkout's training-path encoder
+(``load_model(RUN, fast=False)``), which any checkpoint can be read with.
 ``--breakdown`` prints where the time of one batch goes.
 
     python benchmarks/bench_scorer.py RUN                         # CPU, 1 thread
@@ -53,14 +55,15 @@ def real_stacks(run: Path, limit: int) -> dict[str, np.ndarray]:
 
 
 def measure(run: Path, device: str, threads: int, batches: list[int], repeats: int, calls: int,
-            pool_states: int) -> dict[str, Any]:
-    """States/s of ``distance`` per batch size (median over repeats) in this process."""
+            pool_states: int, fast: bool = True) -> dict[str, Any]:
+    """States/s of ``distance`` per batch size (median over repeats) in this process
+    (``fast=False``: through the training path's encoder, ``load_model(run, fast=False)``)."""
     import torch
 
     import sc2data
 
     torch.set_num_threads(threads)
-    scorer = sc2data.load_model(run, device=device)
+    scorer = sc2data.load_model(run, device=device, fast=fast)
     stacks = real_stacks(run, pool_states)
     n = len(next(iter(stacks.values())))
     texts = [c["text"] for c in scorer.commands] or ["build a barracks"]
@@ -131,7 +134,8 @@ def breakdown(run: Path, device: str, threads: int, batch: int) -> None:
         print(f"  {name:44s} {v:8.2f} ms")
 
 
-def child(code: Path | None, args: argparse.Namespace, threads: int) -> dict[str, Any]:
+def child(code: Path | None, args: argparse.Namespace, threads: int, fast: bool = True
+          ) -> dict[str, Any]:
     """Run :func:`measure` in a fresh interpreter importing sc2data from ``code``."""
     env = dict(os.environ)
     if code is not None:
@@ -139,6 +143,8 @@ def child(code: Path | None, args: argparse.Namespace, threads: int) -> dict[str
     cmd = [sys.executable, __file__, str(args.run), "--worker", "--device", args.device,
            "--threads", str(threads), "--batches", args.batches, "--repeats", str(args.repeats),
            "--calls", str(args.calls), "--pool-states", str(args.pool_states)]
+    if not fast:
+        cmd.append("--training-path")
     res = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False,
                          cwd="/" if code is not None else None)
     if res.returncode:
@@ -156,36 +162,46 @@ def main() -> None:
     ap.add_argument("--calls", type=int, default=20, help="calls per timed repeat")
     ap.add_argument("--pool-states", type=int, default=512, help="real stacks to draw from")
     ap.add_argument("--ref", type=Path, help="another sc2data checkout to compare against")
-    ap.add_argument("--rounds", type=int, default=3, help="alternations with --ref")
+    ap.add_argument("--ref-training-path", action="store_true",
+                    help="compare against this checkout's training path (fast=False) instead")
+    ap.add_argument("--rounds", type=int, default=3, help="alternations with the reference")
     ap.add_argument("--breakdown", action="store_true")
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--training-path", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     batches = [int(b) for b in args.batches.split(",")]
 
     if args.worker:
         print(json.dumps(measure(args.run, args.device, int(args.threads), batches,
-                                 args.repeats, args.calls, args.pool_states)))
+                                 args.repeats, args.calls, args.pool_states,
+                                 fast=not args.training_path)))
         return
     print(f"machine: {platform.platform()}, {os.cpu_count()} CPUs, load average "
           f"{os.getloadavg()[0]:.1f}; run {args.run}; device {args.device}")
     for threads in [int(t) for t in args.threads.split(",")]:
         if args.breakdown:
             breakdown(args.run, args.device, threads, max(batches))
-        codes: list[Path | None] = [None] + ([args.ref] if args.ref else [])
+        codes: list[tuple[Path | None, bool]] = [(None, True)]
+        if args.ref_training_path:
+            codes.append((None, False))
+        elif args.ref:
+            codes.append((args.ref, True))
+        ref = len(codes) > 1
         rates: dict[int, dict[str, list[float]]] = {i: {} for i in range(len(codes))}
-        for _ in range(args.rounds if args.ref else 1):
-            for i, code in enumerate(codes):
-                for b, r in child(code, args, threads)["rates"].items():
+        for _ in range(args.rounds if ref else 1):
+            for i, (code, fast) in enumerate(codes):
+                for b, r in child(code, args, threads, fast)["rates"].items():
                     rates[i].setdefault(b, []).extend(r)
         med = {i: {b: statistics.median(r) for b, r in rs.items()} for i, rs in rates.items()}
         print(f"{args.device}, {threads} torch thread(s): states/s of distance, median of "
               f"{len(rates[0][str(batches[0])])} repeats × {args.calls} calls")
-        head = "  batch  this checkout" + ("   --ref   ratio" if args.ref else "")
+        name = "training path" if args.ref_training_path else "--ref"
+        head = "  batch  this checkout" + (f"  {name:>13s}   ratio" if ref else "")
         print(head)
         for b in batches:
             line = f"  {b:5d}  {med[0][str(b)]:13,.0f}"
-            if args.ref:
-                line += f"  {med[1][str(b)]:6,.0f}  {med[0][str(b)] / med[1][str(b)]:5.1f}×"
+            if ref:
+                line += f"  {med[1][str(b)]:13,.0f}  {med[0][str(b)] / med[1][str(b)]:5.1f}×"
             print(line)
 
 

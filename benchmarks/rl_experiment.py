@@ -146,8 +146,8 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--eval-episodes", nargs="*", default=["macro=5", "paper=2"],
                     help="SPACE=EPISODES of each evaluation (deterministic, then sampled).")
-    ap.add_argument("--paraphrased", type=Path, help="Also one macro narration run (seed 0) with "
-                    "this narration file.")
+    ap.add_argument("--paraphrased", type=Path, help="Also one narration run (seed 0) per action "
+                    "space with this narration file.")
     ap.add_argument("--summary", action="store_true", help="Only print the table.")
     a = ap.parse_args()
     out: Path = a.out
@@ -164,10 +164,10 @@ def main() -> None:
             for space, budget in budgets.items() for seed in a.seeds]
         with ThreadPoolExecutor(a.jobs) as pool:
             futures = [pool.submit(one_run, out, *job, a, lock) for job in jobs]
-            if a.paraphrased is not None and "macro" in budgets:
-                futures.append(pool.submit(one_run, out, "macro", "narration", 0,
-                                           int(budgets["macro"]), a, lock,
-                                           "macro-paraphrased-s0", a.paraphrased))
+            for space, budget in budgets.items():
+                if a.paraphrased is not None:
+                    futures.append(pool.submit(one_run, out, space, "narration", 0, int(budget),
+                                               a, lock, f"{space}-paraphrased-s0", a.paraphrased))
             for f in futures:
                 f.result()
         for space in budgets:

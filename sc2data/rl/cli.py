@@ -82,11 +82,13 @@ def plot_cmd(
     runs: list[Path] = typer.Argument(..., help="Run folders to draw in one figure."),
     out: Path = typer.Option(..., "--out", help="PNG file to write."),
     window: int = typer.Option(10, "--window", help="Episodes per rolling mean."),
+    group: bool = typer.Option(False, "--group", help="One line per action space, reward and "
+                               "narration: the mean over its runs (seeds), shaded min to max."),
 ) -> None:
     """Learning curves (marines per episode against pysc2 steps) of several runs in one PNG."""
     from sc2data.rl.train import plot
 
-    typer.echo(f"wrote {plot(runs, out, window)}")
+    typer.echo(f"wrote {plot(runs, out, window, group)}")
 
 
 @app.command("agreement")

@@ -364,8 +364,16 @@ def play(model: Any, env: Any, seed: int, deterministic: bool) -> Iterator[dict[
         yield info
 
 
-def plot(runs: Sequence[Path], out: Path, window: int = 10) -> Path:
-    """Marines per training episode against pysc2 steps, one line (rolling mean) per run."""
+def _label(cfg: dict[str, Any]) -> str:
+    """``space, reward`` of a run's config, and its narration file's name where not the default."""
+    label = f"{cfg.get('action_space')}, {cfg.get('reward')}"
+    return label + (f" ({Path(cfg['narration']).stem})" if cfg.get("narration") else "")
+
+
+def plot(runs: Sequence[Path], out: Path, window: int = 10, group: bool = False) -> Path:
+    """Marines per training episode against pysc2 steps: one line (rolling mean) per run, or
+    with ``group`` one per action space, reward and narration, the mean of its runs' rolling
+    means over the episodes all of them reached, shaded from the lowest run to the highest."""
     curves = []
     for run in runs:
         if not (run / "config.json").is_file():
@@ -382,14 +390,26 @@ def plot(runs: Sequence[Path], out: Path, window: int = 10) -> Path:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(7, 4.2))
+    groups: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
     for run, cfg, rows in curves:
-        x = np.array([r["env_steps"] for r in rows])
-        y = np.array([r["marines"] for r in rows])
+        x = np.array([r["env_steps"] for r in rows], dtype=float)
+        y = np.array([r["marines"] for r in rows], dtype=float)
         w = min(window, len(y))
         smooth = np.convolve(y, np.ones(w) / w, mode="valid")
-        line, = ax.plot(x[w - 1:], smooth, label=f"{run.name} ({cfg.get('action_space')}, "
-                                                 f"{cfg.get('reward')})")
+        if group:
+            groups.setdefault(_label(cfg), []).append((x[w - 1:], smooth))
+            continue
+        line, = ax.plot(x[w - 1:], smooth, label=f"{run.name} ({_label(cfg)})")
         ax.scatter(x, y, s=6, alpha=0.3, color=line.get_color())
+    for label, members in groups.items():
+        n = min(len(x) for x, _ in members)  # episodes every run of the group reached
+        xs = np.mean([x[:n] for x, _ in members], axis=0)
+        ys = np.array([y[:n] for _, y in members])
+        runs_word = "run" if len(members) == 1 else "runs"
+        line, = ax.plot(xs, ys.mean(axis=0), label=f"{label}: mean of {len(members)} {runs_word}")
+        if len(members) > 1:
+            ax.fill_between(xs, ys.min(axis=0), ys.max(axis=0), alpha=0.15,
+                            color=line.get_color())
     ax.set_xlabel("pysc2 steps (all envs)")
     ax.set_ylabel(f"marines per episode (mean of {window})")
     ax.set_title("BuildMarines, MaskablePPO: game score while training")

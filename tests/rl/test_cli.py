@@ -61,6 +61,11 @@ def test_train_resume_evaluate_plot(tmp_path: Path, capsys: pytest.CaptureFixtur
     code, out, err = run_cli(["rl", "plot", run, run, "--out", png], capsys)
     assert code == 0, err
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    grouped = tmp_path / "grouped.png"
+    code, out, err = run_cli(["rl", "plot", run, run, "--group", "--out", grouped], capsys)
+    assert code == 0, err
+    assert grouped.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert grouped.read_bytes() != png.read_bytes()  # one mean line, not two run lines
 
 
 def test_narration_training_with_a_tiny_mem(mem_run: Path, tmp_path: Path,

@@ -164,10 +164,10 @@ def main() -> None:
             for space, budget in budgets.items() for seed in a.seeds]
         with ThreadPoolExecutor(a.jobs) as pool:
             futures = [pool.submit(one_run, out, *job, a, lock) for job in jobs]
-            for space, budget in budgets.items():
-                if a.paraphrased is not None:
-                    futures.append(pool.submit(one_run, out, space, "narration", 0, int(budget),
-                                               a, lock, f"{space}-paraphrased-s0", a.paraphrased))
+            if a.paraphrased is not None:
+                futures += [pool.submit(one_run, out, space, "narration", 0, int(budget), a, lock,
+                                        f"{space}-paraphrased-s0", a.paraphrased)
+                            for space, budget in budgets.items()]
             for f in futures:
                 f.result()
         for space in budgets:

@@ -370,6 +370,16 @@ def _label(cfg: dict[str, Any]) -> str:
     return label + (f" ({Path(cfg['narration']).stem})" if cfg.get("narration") else "")
 
 
+def seed_band(curves: Sequence[tuple[np.ndarray, np.ndarray]]
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(x, mean, min, max)`` of several runs' ``(x, y)`` curves over the points all of them
+    reached (episode by episode; x is the runs' mean there)."""
+    n = min(len(x) for x, _ in curves)
+    xs = np.mean([x[:n] for x, _ in curves], axis=0)
+    ys = np.array([y[:n] for _, y in curves])
+    return xs, ys.mean(axis=0), ys.min(axis=0), ys.max(axis=0)
+
+
 def plot(runs: Sequence[Path], out: Path, window: int = 10, group: bool = False) -> Path:
     """Marines per training episode against pysc2 steps: one line (rolling mean) per run, or
     with ``group`` one per action space, reward and narration, the mean of its runs' rolling
@@ -402,14 +412,11 @@ def plot(runs: Sequence[Path], out: Path, window: int = 10, group: bool = False)
         line, = ax.plot(x[w - 1:], smooth, label=f"{run.name} ({_label(cfg)})")
         ax.scatter(x, y, s=6, alpha=0.3, color=line.get_color())
     for label, members in groups.items():
-        n = min(len(x) for x, _ in members)  # episodes every run of the group reached
-        xs = np.mean([x[:n] for x, _ in members], axis=0)
-        ys = np.array([y[:n] for _, y in members])
+        xs, mean, lo, hi = seed_band(members)
         runs_word = "run" if len(members) == 1 else "runs"
-        line, = ax.plot(xs, ys.mean(axis=0), label=f"{label}: mean of {len(members)} {runs_word}")
+        line, = ax.plot(xs, mean, label=f"{label}: mean of {len(members)} {runs_word}")
         if len(members) > 1:
-            ax.fill_between(xs, ys.min(axis=0), ys.max(axis=0), alpha=0.15,
-                            color=line.get_color())
+            ax.fill_between(xs, lo, hi, alpha=0.15, color=line.get_color())
     ax.set_xlabel("pysc2 steps (all envs)")
     ax.set_ylabel(f"marines per episode (mean of {window})")
     ax.set_title("BuildMarines, MaskablePPO: game score while training")

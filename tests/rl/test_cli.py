@@ -158,3 +158,15 @@ def test_agreement_counts_add_up_and_follow_the_threshold(
     assert_one_line_error(code, err, "does not exist")
     code, _, err = run_cli(["rl", "agreement", tmp_path, "--mem", mem_run], capsys)
     assert_one_line_error(code, err, "not a trained sc2data rl run")
+
+
+def test_seed_band_spans_the_episodes_every_run_reached() -> None:
+    import numpy as np
+
+    from sc2data.rl.train import seed_band
+
+    a = (np.array([10.0, 20.0, 30.0]), np.array([1.0, 4.0, 9.0]))
+    b = (np.array([12.0, 22.0]), np.array([3.0, 2.0]))
+    xs, mean, lo, hi = seed_band([a, b])
+    assert xs.tolist() == [11.0, 21.0]
+    assert mean.tolist() == [2.0, 3.0] and lo.tolist() == [1.0, 2.0] and hi.tolist() == [3.0, 4.0]

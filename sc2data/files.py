@@ -8,7 +8,9 @@ Every writer in sc2data goes through this module:
   resumed runs treat any ``*.partial`` as debris;
 * content is identified by sha256 (:func:`sha256_file`, :func:`sha256_files`);
 * one :class:`FolderLock` per output folder (``.lock``) keeps two commands from writing it at once,
-  and the refusal names the command that holds it.
+  and the refusal names the command that holds it; the lock never follows a link or writes into
+  a file it did not make, and :func:`writer` tells a reader (``verify``) that a folder is being
+  written now.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import errno
 import fcntl
 import hashlib
 import os
+import stat
 import time
 from collections.abc import Iterable, Iterator
 from pathlib import Path
@@ -129,7 +132,7 @@ class FolderLock:
         """``name``: the lock file in ``folder``; ``what``: the path named in the refusal (a
         folder that is written whole and renamed into place is locked from beside it)."""
         self.folder, self.command, self.what = folder, command, what or folder
-        self._fd = os.open(folder / name, os.O_RDWR | os.O_CREAT, 0o644)
+        self._fd = _open_lock(folder / name)
         try:
             self._take(fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH,
                        LOCK_WAIT_S if wait_s is None else wait_s)
@@ -141,11 +144,7 @@ class FolderLock:
             raise
 
     def _holder(self) -> str:
-        with contextlib.suppress(OSError, UnicodeDecodeError):
-            text = os.pread(self._fd, 200, 0).decode().strip()
-            if text.startswith("sc2data "):
-                return text.split(" (pid")[0]
-        return "sc2data command"
+        return (_record(self._fd) or "sc2data command").split(" (pid")[0]
 
     def _take(self, mode: int, wait_s: float) -> None:
         deadline = time.monotonic() + wait_s
@@ -168,6 +167,88 @@ class FolderLock:
 
     def __exit__(self, *exc: object) -> None:
         os.close(self._fd)
+
+
+_MINE = b"sc2data "
+"""How the record in every lock file sc2data writes begins (``sc2data label (pid 12)``)."""
+
+
+def _record(fd: int) -> str | None:
+    """The record in an open lock file (``sc2data train (pid 12)``), None if it holds none."""
+    with contextlib.suppress(OSError, UnicodeDecodeError):
+        text = os.pread(fd, 200, 0).decode().strip()
+        if text.startswith(_MINE.decode()):
+            return text
+    return None
+
+
+def _not_a_lock(path: Path, why: str) -> Sc2DataError:
+    return Sc2DataError(f"{path} {why}, so it is not a lock file sc2data made (sc2data never "
+                        f"writes through it); move it away or delete it, then rerun the command")
+
+
+_KINDS = {stat.S_IFLNK: "a symbolic link", stat.S_IFDIR: "a folder", stat.S_IFIFO: "a named pipe",
+          stat.S_IFSOCK: "a socket", stat.S_IFCHR: "a device", stat.S_IFBLK: "a device"}
+
+
+def _open_lock(path: Path) -> int:
+    """Open (or create) the lock file at ``path`` for reading and writing, never through a link:
+    a one-line error unless it is a regular file with one name whose content is empty or
+    sc2data's own record, so that the lock never writes into a file it did not make."""
+    for _ in range(10):
+        try:
+            st = os.lstat(path)
+        except FileNotFoundError:
+            try:  # made here, by us: O_EXCL fails if anything appeared there meanwhile
+                return os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW
+                               | os.O_CLOEXEC, 0o644)
+            except FileExistsError:
+                continue
+        if not stat.S_ISREG(st.st_mode):
+            raise _not_a_lock(path, f"is {_KINDS.get(stat.S_IFMT(st.st_mode), 'not a file')}")
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_NOFOLLOW | os.O_CLOEXEC | os.O_NONBLOCK)
+        except FileNotFoundError:  # removed meanwhile: make it
+            continue
+        except OSError as e:
+            if e.errno == errno.ELOOP:  # became a link meanwhile
+                raise _not_a_lock(path, "is a symbolic link") from None
+            raise
+        try:
+            st = os.fstat(fd)
+            if not stat.S_ISREG(st.st_mode):
+                raise _not_a_lock(path, f"is {_KINDS.get(stat.S_IFMT(st.st_mode), 'not a file')}")
+            if st.st_nlink != 1:
+                raise _not_a_lock(path, f"has {st.st_nlink} names (hard links to one file)")
+            if st.st_size and _record(fd) is None:
+                raise _not_a_lock(path, "holds something other than sc2data's lock record")
+        except BaseException:
+            os.close(fd)
+            raise
+        return fd
+    raise Sc2DataError(f"{path} keeps changing while sc2data opens it as its lock file; stop "
+                       f"whatever is replacing it, then rerun the command")
+
+
+def writer(folder: Path, name: str = LOCK) -> str | None:
+    """The command writing ``folder`` now, as its lock records it (``sc2data train (pid 12)``),
+    or None when no process holds the lock. Reads only: it never creates the lock file, and a
+    lock path that is not a regular file counts as no lock."""
+    try:
+        fd = os.open(folder / name, os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC | os.O_NONBLOCK)
+    except OSError:
+        return None
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            return None
+        try:  # flock ignores the open mode: a held lock, shared or not, refuses this one
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return _record(fd) or "an sc2data command"
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        return None
+    finally:
+        os.close(fd)
 
 
 def check_out(path: Path, flag: str = "--out") -> None:

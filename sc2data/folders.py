@@ -14,13 +14,12 @@ apart by their files, described (``sc2data info``) and checked (``sc2data verify
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from sc2data.errors import Sc2DataError
-from sc2data.formats import Shape, check_record
+from sc2data.formats import Shape, check_record, loads
 
 
 def kind(folder: Path) -> str:
@@ -120,7 +119,8 @@ def _records(path: Path, shape: Shape, lines: bool = False) -> list[Any]:
         return []
     try:
         text = path.read_text()
-        records = [json.loads(t) for t in text.splitlines()] if lines else [json.loads(text)]
+        records = [loads(t, finite=False) for t in text.splitlines()] if lines else \
+            [loads(text, finite=False)]
     except (OSError, ValueError) as e:
         raise Sc2DataError(f"{path} is unreadable ({e}); train the run again") from None
     for r in records:

@@ -10,10 +10,14 @@ hyphenated ids of shards and datasets stay; formats added later use the dotted f
 A record's header says whose it is; its *shape* (:data:`Shape`: which fields, of which JSON
 types) says it can be read: :func:`check_record` turns valid JSON of the wrong shape (``[]``,
 ``null``, a field of the wrong type) into the same one-line error, before any reader looks inside.
+And every JSON record is parsed by :func:`loads`, which refuses what no sc2data record holds and
+what would otherwise end as a traceback further on: nesting deeper than :data:`MAX_DEPTH`,
+``NaN``/``Infinity`` (or a number too large to be finite) and integers beyond 64 bits.
 """
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -28,6 +32,54 @@ allowed; ``"key?"`` may be absent; ``"*"`` is every value of the object)."""
 
 _WORDS = {dict: "an object", list: "a list", str: "a string", int: "an integer",
           float: "a number", bool: "true or false", type(None): "null"}
+
+
+MAX_DEPTH = 64
+"""The deepest nesting of objects and lists a record may have (sc2data's own stay under 10)."""
+
+
+class RecordError(ValueError):
+    """A JSON text that is no record sc2data can read; the message says why in a few words."""
+
+
+def _finite(text: str) -> float:
+    value = float(text)
+    if value != value or value in (float("inf"), float("-inf")):
+        raise RecordError(f"it holds the number {text}, too large to be finite")
+    return value
+
+
+def _no_constant(name: str) -> Any:
+    raise RecordError(f"it holds {name}, not a finite number")
+
+
+def _int64(text: str) -> int:
+    value = int(text)
+    if not -(1 << 63) <= value < 1 << 64:
+        raise RecordError(f"it holds the integer {text[:20]}…, beyond 64 bits")
+    return value
+
+
+def loads(text: str | bytes, *, finite: bool = True) -> Any:
+    """``json.loads`` for records: a :class:`RecordError` (a ``ValueError``, as every reader
+    already catches) for invalid JSON, nesting deeper than :data:`MAX_DEPTH`, a non-finite number
+    (unless not ``finite``: a metrics row's NaN loss is a measurement) or an integer beyond 64
+    bits, rather than a ``RecursionError`` here or an ``OverflowError`` where the value is
+    used."""
+    try:
+        value = json.loads(text, parse_int=_int64, **(
+            {"parse_float": _finite, "parse_constant": _no_constant} if finite else {}))
+    except RecursionError:
+        raise RecordError(f"it is nested deeper than {MAX_DEPTH} levels") from None
+    level, depth = [value], 0
+    while level:  # breadth first, so that no walk here recurses either
+        depth += 1
+        if depth > MAX_DEPTH:
+            raise RecordError(f"it is nested deeper than {MAX_DEPTH} levels")
+        level = [v for c in level if isinstance(c, (dict, list))
+                 for v in (c.values() if isinstance(c, dict) else c)
+                 if isinstance(v, (dict, list))]
+    return value
 
 
 def _word(value: Any) -> str:

@@ -52,10 +52,33 @@ def _deep(record: Any) -> Any:
     return _wrong(record)
 
 
+class Raw(str):
+    """A record's text as it is, not a value to write as JSON."""
+
+
+def _nested(record: Any) -> Raw:
+    """The header, and a field nested 100,000 lists deep (Python's parser gives up at ~1,000)."""
+    header = {k: record[k] for k in HEADER if isinstance(record, dict) and k in record}
+    return Raw(json.dumps(header)[:-1] + (", " if header else "") + '"settings": '
+               + "[" * 100_000 + "]" * 100_000 + "}")
+
+
+def _infinite(record: Any) -> Raw:
+    """Every number (the header's aside), at any depth, ``Infinity``: JSON that Python reads."""
+    def inf(v: Any, key: str = "") -> Any:
+        if isinstance(v, dict):
+            return {k: inf(x, k) for k, x in v.items()}
+        if isinstance(v, list):
+            return [inf(x) for x in v]
+        numeric = isinstance(v, (int, float)) and not isinstance(v, bool)
+        return float("inf") if numeric and key not in HEADER else v
+    return Raw(json.dumps(inf(record)))
+
+
 BAD: dict[str, Callable[[Any], Any]] = {
     "list": lambda r: [], "empty": lambda r: {}, "foreign": lambda r: {"episodes": "x"},
     "null": lambda r: None, "number": lambda r: 3, "string": lambda r: "x",
-    "top-types": _top, "deep-types": _deep,
+    "top-types": _top, "deep-types": _deep, "nested": _nested, "infinite": _infinite,
 }
 """Bad contents, made from the good record."""
 
@@ -162,7 +185,8 @@ def _run(good: dict[str, Path], tmp: Path, kind: str, command: str,
         shutil.copytree(good["data"], build / "rollout")
     for record in (folder / name, build / "rollout" / name):
         if content is not None and record.exists():
-            record.write_text(json.dumps(content(json.loads(record.read_text()))))
+            bad = content(json.loads(record.read_text()))
+            record.write_text(bad if isinstance(bad, Raw) else json.dumps(bad))
     code, _, err = run_cli([a.format(folder=folder, tmp=tmp, build=build, recipe=good["recipe"],
                                      run=good["run"], pairs=good["pairs"]) for a in argv], capsys)
     return code, err, folder / name
@@ -189,12 +213,15 @@ def test_each_command_reads_the_good_record(good: dict[str, Path], tmp_path: Pat
         assert code == 0, err
 
 
-CASES = [(kind, bad, command) for kind, (_, commands) in READERS.items() for bad in BAD
-         for command in commands]
+RL_PARSE = pytest.mark.xfail(strict=True, reason="sc2data/rl/train.py reads its records with "
+                             "json.loads, not sc2data.formats.loads (the rl rewrite takes it)")
+CASES = [pytest.param(kind, bad, command, id=f"{kind}-{bad}-{command}",
+                      marks=[RL_PARSE] if kind.startswith("rl-") and bad == "nested"
+                      else [])
+         for kind, (_, commands) in READERS.items() for bad in BAD for command in commands]
 
 
-@pytest.mark.parametrize("kind, bad, command", CASES,
-                         ids=[f"{k}-{b}-{c}" for k, b, c in CASES])
+@pytest.mark.parametrize("kind, bad, command", CASES)
 def test_wrong_shape_is_one_line(good: dict[str, Path], tmp_path: Path, kind: str, bad: str,
                                  command: str, capsys: pytest.CaptureFixture[str]) -> None:
     before: dict[Path, int] = {}

@@ -37,9 +37,13 @@ def data(dataset: Path, tmp_path: Path) -> Path:
     return Path(shutil.copytree(dataset, tmp_path / "data"))
 
 
-def _snapshot(folder: Path) -> dict[str, bytes]:
+def _snapshot(folder: Path, *, results: bool = False) -> dict[str, bytes]:
+    """Every regular file's bytes; ``results``: only what a command leaves as its result (not
+    the lock's record, nor a resumable label run's parts), and no partial file may be there."""
+    assert not results or not list(folder.rglob("*.partial"))
     return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*"))
-            if p.is_file() and not p.is_symlink()}
+            if p.is_file() and not p.is_symlink() and not (results and (
+                p.name == ".lock" or ".labels-parts" in p.parts))}
 
 
 # -- the folder lock never follows a link ----------------------------------------------------------
@@ -99,3 +103,89 @@ def test_train_never_writes_through_a_linked_lock(tmp_path: Path,
     assert_one_line_error(code, err, f"{run / '.lock'} is a symbolic link")
     assert victim.read_text() == "precious\n"
     assert sorted(p.name for p in run.iterdir()) == [".lock"]
+
+
+# -- plugins: a rules file cannot end the process, a rule cannot change its batch ---------------
+
+EXITS = "import sys\nsys.exit(0)\n"
+ONE_RULE = '''
+import numpy as np
+from sc2data.rulebase import rule
+
+
+@rule(id="{id}", command="{id} text", requires=["player"])
+def {id}(batch):
+    return np.ones(len(batch), bool)
+'''
+WRITES = '''
+import numpy as np
+from sc2data.rulebase import rule
+
+
+@rule(id="a_writer", command="writes", requires=["screen/unit_type"])
+def a_writer(batch):
+    if len(batch) > {min_size}:  # 5 and 1 are the load check's synthetic batches
+        batch.layer("screen/unit_type")[:] = 0
+    return np.zeros(len(batch), bool)
+'''
+
+
+@pytest.mark.parametrize("argv", [["rules", "list"], ["label", "{data}", "--overwrite",
+                                                     "--no-progress"]])
+def test_a_rules_file_that_calls_sys_exit_is_one_line(
+        data: Path, tmp_path: Path, argv: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    rules = tmp_path / "rules"
+    rules.mkdir()
+    (rules / "exits.py").write_text(EXITS)
+    before = _snapshot(data, results=True)
+    code, out, err = run_cli([a.format(data=data) for a in argv] + ["--rules-dir", str(rules)],
+                             capsys)
+    assert_one_line_error(code, err, f"rule file {rules / 'exits.py'} called sys.exit(0) while "
+                                     f"it was imported")
+    assert out == ""
+    assert _snapshot(data, results=True) == before
+
+
+@pytest.mark.parametrize("min_size", [0, 5])
+def test_a_rule_writing_into_its_batch_is_named(data: Path, tmp_path: Path, min_size: int,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """Caught on the load check's batch (``min_size`` 0), or on the data (5)."""
+    rules = tmp_path / "rules"
+    rules.mkdir()
+    (rules / "writer.py").write_text(WRITES.format(min_size=min_size))
+    (rules / "zz_reader.py").write_text(ONE_RULE.format(id="zz_reader"))
+    before = _snapshot(data, results=True)
+    code, _, err = run_cli(["label", str(data), "--rules-dir", str(rules), "--no-progress"],
+                           capsys)
+    assert_one_line_error(code, err, "rule 'a_writer' from file", "wrote into the batch it was "
+                          "given", "a synthetic batch" if min_size == 0 else "episode 0 step 0")
+    assert _snapshot(data, results=True) == before
+
+
+def test_rules_see_the_batch_as_read(dataset: Path) -> None:
+    """Every rule, in every position, gets the stored arrays: a rule before it cannot change
+    them (its view is read-only, and a new key or array it sets is its own)."""
+    import numpy as np
+
+    from sc2data.data.dataset import open_dataset
+    from sc2data.labels.registry import call
+    from sc2data.rulebase import rule
+
+    seen: list[np.ndarray] = []
+
+    @rule(id="swaps", command="swaps", requires=["screen/unit_type"])
+    def swaps(batch):  # type: ignore[no-untyped-def]
+        batch.arrays["screen/unit_type"] = np.zeros_like(batch.arrays["screen/unit_type"])
+        return np.zeros(len(batch), bool)
+
+    @rule(id="looks", command="looks", requires=["screen/unit_type"])
+    def looks(batch):  # type: ignore[no-untyped-def]
+        seen.append(np.array(batch.layer("screen/unit_type")))
+        return np.zeros(len(batch), bool)
+
+    batch = open_dataset(dataset)[0:8]
+    stored = np.array(batch.layer("screen/unit_type"))
+    assert stored.any()
+    for r in (looks, swaps, looks):
+        call(r, "test", batch)
+    assert all(np.array_equal(s, stored) for s in seen) and len(seen) == 2

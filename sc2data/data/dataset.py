@@ -28,7 +28,7 @@ from sc2data.data.chunks import ChunkDecoder, Codec
 from sc2data.data.shards import Shard
 from sc2data.errors import Sc2DataError
 from sc2data.files import write_atomic
-from sc2data.formats import DATASET
+from sc2data.formats import DATASET, loads
 from sc2data.schema import Block, Index, Schema, SchemaError, StackBatch, positions
 
 MANIFEST = "dataset.json"
@@ -73,7 +73,7 @@ def read_manifest(folder: Path) -> dict[str, Any]:
         raise Sc2DataError(f"{folder} is not an sc2data dataset (no {MANIFEST}); make one with "
                            f"`sc2data rollout --out {folder}`")
     try:
-        manifest = json.loads(path.read_text())
+        manifest = loads(path.read_text())
     except (OSError, ValueError) as e:
         raise Sc2DataError(f"{path} is unreadable ({e}); delete the folder and roll out again")
     DATASET.check(manifest, path)

@@ -14,6 +14,7 @@ import numpy as np
 import pyarrow as pa
 
 from sc2data.errors import Sc2DataError
+from sc2data.formats import loads
 from sc2data.labels.registry import Registered, call, check_output
 from sc2data.labels.source import Batches, Unit
 from sc2data.labels.store import FORMAT_VERSION, write_sums, write_table
@@ -114,7 +115,7 @@ def parts_run(state: Path) -> str | None:
     """The fingerprint of the run a parts folder belongs to (its ``state.json``); None if it has
     none sc2data can read, so its parts are not resumed."""
     try:
-        record = json.loads(state.read_text())
+        record = loads(state.read_text())
     except (OSError, ValueError):
         return None
     run = record.get("fingerprint") if isinstance(record, dict) else None

@@ -9,7 +9,11 @@ its ``*.py`` files, each exposing ``RULES`` or module-level rule objects.
 Every rule is checked when it loads — id format, unique id, text and version, real schema keys
 in ``requires``, and a call on a small synthetic batch that must answer a ``(B,)`` bool array
 without reading undeclared keys — and a bad one stops the load with a one-line
-:class:`RuleError` naming it and its source.
+:class:`RuleError` naming it and its source. A plugin cannot end the process either: a
+``sys.exit`` while its module imports, its class is built or a rule runs is such an error too.
+
+Rules run on a read-only batch (:func:`call` hands each rule its own view of the arrays, not
+writeable), so no rule can change what a later rule sees; a rule that tries is named.
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ import numpy as np
 
 from sc2data.errors import Sc2DataError
 from sc2data.rulebase import RULE_ID, Rule, describe, is_schema_key, synthetic_batch
-from sc2data.schema import MissingLayerError
+from sc2data.schema import MissingLayerError, StackBatch
 
 GROUP = "sc2data.rules"
 """The entry-point group rules are registered under."""
@@ -145,6 +149,9 @@ def _load_entry_point(ep: metadata.EntryPoint) -> list[Registered]:
     source = f"{dist} (entry point {ep.name}: {ep.value})"
     try:
         obj = ep.load()
+    except SystemExit as e:  # at import: it would end this command silently, with its code
+        raise RuleError(f"rule plugin {source} called sys.exit({e.code!r}) while it was "
+                        f"imported; a rule plugin defines rules, fix or uninstall it") from None
     except Exception as e:  # a plugin's import error must not become our traceback
         raise RuleError(f"rule plugin {source} failed to import: {type(e).__name__}: {e}; fix "
                         f"or uninstall it") from e
@@ -188,6 +195,10 @@ def _import_file(path: Path) -> types.ModuleType:
     sys.modules[name] = module  # dataclasses and pickling look modules up here
     try:
         spec.loader.exec_module(module)
+    except SystemExit as e:  # at import: it would end this command silently, with its code
+        del sys.modules[name]
+        raise RuleError(f"rule file {path} called sys.exit({e.code!r}) while it was imported; "
+                        f"a rule file defines rules, remove the call") from None
     except Exception as e:
         del sys.modules[name]
         raise RuleError(f"rule file {path} failed to import: {type(e).__name__}: {e}") from e
@@ -210,6 +221,9 @@ def _instantiate(obj: Any, source: str) -> Rule:
     if inspect.isclass(obj):
         try:
             return obj()
+        except SystemExit as e:
+            raise RuleError(f"rule class {obj.__name__} from {source} called sys.exit({e.code!r}) "
+                            f"when built; a rule returns a bool array") from None
         except Exception as e:
             raise RuleError(f"rule class {obj.__name__} from {source} cannot be built with no "
                             f"arguments ({type(e).__name__}: {e}); list an instance instead") from e
@@ -255,10 +269,32 @@ def validate(rule: Any, source: str) -> None:
                      where="a synthetic batch")
 
 
+def read_only(batch: Any) -> Any:
+    """A :class:`StackBatch` of read-only views of ``batch``'s arrays (shared memory, nothing
+    copied); anything else as it is."""
+    if not isinstance(batch, StackBatch):
+        return batch
+    views = {}
+    for k, a in batch.arrays.items():
+        v = a.view() if isinstance(a, np.ndarray) else np.asarray(a)
+        v.flags.writeable = False
+        views[k] = v
+    return StackBatch(views, batch.schema)
+
+
 def call(rule: Rule, source: str, batch: Any, where: str = "a synthetic batch") -> Any:
-    """``rule(batch)``, with any exception turned into a one-line :class:`RuleError`."""
+    """``rule(batch)`` on a read-only view of ``batch`` (its own, so that neither its arrays nor
+    its keys change what a later rule sees), with any exception turned into a one-line
+    :class:`RuleError`."""
     try:
-        return rule(batch)
+        return rule(read_only(batch))
+    except ValueError as e:
+        if "read-only" not in str(e):
+            raise RuleError(f"rule {rule.id!r} from {source} raised ValueError: {e} on "
+                            f"{where}") from e
+        raise RuleError(f"rule {rule.id!r} from {source} wrote into the batch it was given "
+                        f"({e}) on {where}; a rule must not change its input: copy an array "
+                        f"before changing it (np.array(batch.layer(...)))") from None
     except MissingLayerError as e:
         raise RuleError(f"rule {rule.id!r} from {source} reads data it does not list in requires "
                         f"{tuple(rule.requires)} ({e}) on {where}; add the key to requires") from e

@@ -26,6 +26,7 @@ import pyarrow.parquet as pq
 
 from sc2data.errors import Sc2DataError
 from sc2data.files import atomic_file, sha256_file, write_atomic
+from sc2data.formats import loads
 
 LABELS_FILE = "labels.parquet"
 STACKS_FILE = "stack_labels.parquet"
@@ -52,7 +53,7 @@ def write_sums(path: Path, files: list[Path]) -> None:
 def check_sums(path: Path, rerun: str) -> None:
     """One-line error unless every file listed in ``path`` has the sha256 recorded there."""
     try:
-        sums = json.loads(path.read_text())
+        sums = loads(path.read_text())
         if not isinstance(sums, dict) or not sums:
             raise ValueError("not a table of files")
     except FileNotFoundError:
@@ -88,7 +89,7 @@ def file_meta(path: Path) -> dict[str, Any]:
         if raw is None:
             raise Sc2DataError(f"{path} was not written by sc2data label; relabel with sc2data "
                                f"label")
-        meta = json.loads(raw)
+        meta = loads(raw)
     except (OSError, ValueError, pa.ArrowException) as e:
         raise Sc2DataError(f"{path} is unreadable ({type(e).__name__}); rerun sc2data label "
                            f"{path.parent}") from None

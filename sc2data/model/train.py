@@ -48,7 +48,7 @@ from sc2data.files import (
     write_atomic,
     writing,
 )
-from sc2data.formats import Shape, check_record
+from sc2data.formats import Shape, check_record, loads
 from sc2data.model.words import load_word_vectors
 from sc2data.pairs.loader import PairLoader, PairSet
 from sc2data.provenance import versions
@@ -439,7 +439,7 @@ CONFIG_SHAPE: Shape = {"data": str, "epochs": int, "batch_size": int, "lr": floa
 
 def _read_record(path: Path, shape: Shape) -> dict[str, Any]:
     try:
-        record = json.loads(path.read_text())
+        record = loads(path.read_text())
     except (OSError, ValueError) as e:
         raise Sc2DataError(f"{path} is unreadable ({e}); train again with --overwrite") from None
     check_record(record, shape, path, "train again with --overwrite")

@@ -10,7 +10,6 @@ window, and applies the model's input packing, while the model trains on the cur
 
 from __future__ import annotations
 
-import json
 import queue
 import threading
 from collections.abc import Callable, Iterator, Sequence
@@ -22,7 +21,7 @@ import numpy as np
 import pyarrow.parquet as pq
 
 from sc2data.errors import Sc2DataError
-from sc2data.formats import PAIRSET
+from sc2data.formats import PAIRSET, loads
 from sc2data.pairs.layout import META_FILE, PAIRS_FILE, check_content, packed_path
 from sc2data.pairs.packed import BLOCK, PackedSplit
 from sc2data.schema import Schema, SchemaError
@@ -60,12 +59,12 @@ class PairSet:
                                f"sc2data build RECIPE --out DIR")
         meta_path = self.path / META_FILE
         try:
-            self.meta: dict[str, Any] = json.loads(meta_path.read_text())
+            self.meta: dict[str, Any] = loads(meta_path.read_text())
         except FileNotFoundError:
             raise Sc2DataError(f"{self.path} has no pairset.json; is it a pair-set folder "
                                f"(sc2data pair output)?") from None
-        except (json.JSONDecodeError, UnicodeDecodeError) as e:
-            raise Sc2DataError(f"{meta_path} is not valid JSON ({e}); rebuild the pair set") \
+        except ValueError as e:  # invalid JSON, or no record (formats.loads)
+            raise Sc2DataError(f"{meta_path} is not a readable record ({e}); rebuild the pair set") \
                 from None
         PAIRSET.check(self.meta, meta_path)
         try:

@@ -32,7 +32,7 @@ from sc2data.files import (
     sha256_files,
     write_atomic,
 )
-from sc2data.formats import PAIRSET
+from sc2data.formats import PAIRSET, loads
 from sc2data.labels.apply import labels_fingerprint
 from sc2data.pairs.draw import Labelled, NotEnoughStates, build_pairs
 from sc2data.pairs.layout import (
@@ -167,7 +167,7 @@ def _stored(out: Path) -> dict[str, Any] | str:
     if not meta_path.is_file():
         return f"no {META_FILE}"
     try:
-        meta = json.loads(meta_path.read_text())
+        meta = loads(meta_path.read_text())
         PAIRSET.check(meta, meta_path)
     except (OSError, ValueError, Sc2DataError) as e:
         return str(e)

@@ -1,65 +1,115 @@
-"""Vectorised BuildMarines env throughput for RL, with and without the MEM narration reward.
+"""`sc2data rl train` end to end: decisions and pysc2 steps per second, PPO updates included.
 
-Steps ``--envs`` environments (one subprocess each, SB3's ``SubprocVecEnv``; in-process for 1)
-with uniformly random *masked* macro actions and reports decisions/s and pysc2 steps/s (median
-of ``--repeats``) for the sparse reward and for narration shaping with the MEM of ``--mem``
-(each subprocess loads it, torch on one thread). Policy learning is not included.
+Each measurement is a fresh process that imports a code tree (``--code NAME=PATH``: this
+checkout, or another one such as a ``git worktree`` of an older commit, so old and new are
+measured in one sitting), builds ``RLConfig(**settings)`` and times ``train()`` alone (imports
+excluded; worker start-up, MEM loading and every PPO update included). Settings an older tree's
+``RLConfig`` lacks are dropped for it. Runs alternate between cases, ``--repeats`` rounds; the
+table gives the median of each case and the CPU seconds (this process and its children) per
+1,000 decisions.
 
-    .venv/bin/python benchmarks/bench_rl.py --mem demo-out/run --envs 1 2 --decisions 600
+    .venv/bin/python benchmarks/bench_rl.py --mem demo-out/run --steps 8192 \\
+        --code new=. --code old=/tmp/sc2data-old \\
+        --case old:paper:narration:envs=1 --case new:paper:narration:envs=16,obs_size=32
+
+A case is ``CODE:SPACE:REWARD[:key=value,...]`` (values parsed as Python literals where they can
+be: ``envs=16,obs=stored,processes=0``).
 """
 
 from __future__ import annotations
 
 import argparse
+import ast
+import json
+import os
+import platform
 import statistics
-import time
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
 
-import numpy as np
+CHILD = r"""
+import dataclasses, json, os, resource, sys, time
+sys.path.insert(0, sys.argv[1])
+from sc2data.rl.train import RLConfig, train
+settings = json.loads(sys.argv[2])
+known = {f.name for f in dataclasses.fields(RLConfig)}
+dropped = sorted(set(settings) - known)
+cfg = RLConfig(**{k: v for k, v in settings.items() if k in known})
+import torch  # noqa: F401  (imported before the clock starts, as train() would)
+t0, r0 = time.perf_counter(), resource.getrusage(resource.RUSAGE_SELF)
+train(cfg)
+dt = time.perf_counter() - t0
+r1, rc = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime) + rc.ru_utime + rc.ru_stime
+state = json.load(open(os.path.join(cfg.out, "state.json")))
+print(json.dumps({"seconds": dt, "cpu": cpu, "timesteps": state["timesteps"],
+                  "env_steps": state["env_steps"], "dropped": dropped}))
+"""
 
-from sc2data.rl.train import RLConfig, make_vec_env
+
+def parse_case(text: str) -> tuple[str, str, str, dict[str, object]]:
+    parts = text.split(":", 3)
+    if len(parts) < 3:
+        raise SystemExit(f"bad --case {text!r}: CODE:SPACE:REWARD[:key=value,...]")
+    extra: dict[str, object] = {}
+    for item in (parts[3].split(",") if len(parts) > 3 and parts[3] else []):
+        k, _, v = item.partition("=")
+        try:
+            extra[k] = ast.literal_eval(v)
+        except (ValueError, SyntaxError):
+            extra[k] = v
+    return parts[0], parts[1], parts[2], extra
 
 
-def measure(cfg: RLConfig, decisions: int) -> tuple[float, float]:
-    """(decisions/s, pysc2 steps/s) over ``decisions`` vector steps, after a warm-up step."""
-    vec = make_vec_env(cfg)
-    rng = np.random.default_rng(0)
-    try:
-        vec.seed(0)
-        vec.reset()
-        steps = 0
-        t0 = 0.0
-        for i in range(decisions + 1):
-            masks = vec.env_method("action_masks")
-            actions = np.array([rng.choice(np.flatnonzero(m)) for m in masks])
-            _, _, _, infos = vec.step(actions)
-            if i == 0:  # warm-up: subprocess start, MEM load, first forward
-                t0 = time.perf_counter()
-                continue
-            steps += sum(int(info.get("env_steps", 1)) for info in infos)
-        dt = time.perf_counter() - t0
-    finally:
-        vec.close()
-    return decisions * cfg.envs / dt, steps / dt
+def measure(code: Path, settings: dict[str, object]) -> dict[str, object]:
+    env = {**os.environ, "PYTHONPATH": str(code)}
+    out = subprocess.run([sys.executable, "-c", CHILD, str(code), json.dumps(settings)],
+                         capture_output=True, text=True, env=env, check=False)
+    if out.returncode:
+        raise SystemExit(f"measurement failed ({settings}):\n{out.stderr[-2000:]}")
+    return json.loads(out.stdout.strip().splitlines()[-1])  # type: ignore[no-any-return]
 
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--mem", help="MEM run for the narration reward (omit: sparse only)")
-    p.add_argument("--envs", type=int, nargs="+", default=[1, 2])
-    p.add_argument("--decisions", type=int, default=600, help="vector steps per repeat")
+    p.add_argument("--code", action="append", default=[], help="NAME=PATH of a code tree")
+    p.add_argument("--case", action="append", required=True, help="CODE:SPACE:REWARD[:k=v,..]")
+    p.add_argument("--mem", help="MEM run for the narration reward")
+    p.add_argument("--steps", type=int, default=8192, help="decisions per measurement")
     p.add_argument("--repeats", type=int, default=3)
     a = p.parse_args()
-    rewards = ["sparse"] + (["narration"] if a.mem else [])
-    print(f"| reward | envs | decisions/s (median) | pysc2 steps/s (median) |")
-    print("| --- | --- | --- | --- |")
-    for reward in rewards:
-        for k in a.envs:
-            cfg = RLConfig(out="unused", reward=reward, envs=k,
-                           mem=a.mem if reward == "narration" else None)
-            runs = [measure(cfg, a.decisions) for _ in range(a.repeats)]
-            d = statistics.median(r[0] for r in runs)
-            s = statistics.median(r[1] for r in runs)
-            print(f"| {reward} | {k} | {d:,.0f} | {s:,.0f} |", flush=True)
+    codes = {"new": Path(".").resolve()}
+    codes.update({k: Path(v).resolve() for k, v in (c.split("=", 1) for c in a.code)})
+    cases = [parse_case(c) for c in a.case]
+    results: dict[int, list[dict[str, object]]] = {i: [] for i in range(len(cases))}
+    with tempfile.TemporaryDirectory() as tmp:
+        for r in range(a.repeats):
+            for i, (code, space, reward, extra) in enumerate(cases):
+                settings: dict[str, object] = {
+                    "out": f"{tmp}/run-{i}-{r}", "action_space": space, "reward": reward,
+                    "steps": a.steps, "seed": r, "progress": False,
+                    "checkpoint_every": 10 ** 9, **extra}
+                if reward == "narration":
+                    settings["mem"] = a.mem
+                res = measure(codes[code], settings)
+                results[i].append(res)
+                print(f"# round {r}: {a.case[i]}: {res['timesteps'] / res['seconds']:,.0f} "
+                      f"decisions/s", file=sys.stderr, flush=True)
+    print(f"machine: {platform.platform()}, {os.cpu_count()} cores; --steps {a.steps}, median "
+          f"of {a.repeats}")
+    print("| code | space | reward | settings | decisions/s | pysc2 steps/s | CPU-s per 1k "
+          "decisions |")
+    print("| --- | --- | --- | --- | ---: | ---: | ---: |")
+    for i, (code, space, reward, extra) in enumerate(cases):
+        rs = results[i]
+        dps = statistics.median(float(x["timesteps"]) / float(x["seconds"]) for x in rs)
+        sps = statistics.median(float(x["env_steps"]) / float(x["seconds"]) for x in rs)
+        cpu = statistics.median(1000 * float(x["cpu"]) / float(x["timesteps"]) for x in rs)
+        dropped = rs[0]["dropped"]
+        shown = ", ".join(f"{k}={v}" for k, v in extra.items() if k not in dropped) or "-"
+        print(f"| {code} | {space} | {reward} | {shown} | {dps:,.0f} | {sps:,.0f} | {cpu:.2f} |")
 
 
 if __name__ == "__main__":

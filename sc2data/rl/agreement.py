@@ -70,7 +70,7 @@ def agreement(run: Path, mem: Path, *, episodes: int = 3, deterministic: bool = 
 
     model = MaskablePPO.load(run / "model.zip", device="cpu")
     loops = cfg.episode_steps * STEP_MUL if cfg.episode_steps else None
-    env = BuildMarinesGym(cfg.action_space, backend=cfg.backend, layers=cfg.layers,
+    env = BuildMarinesGym(cfg.action_space, backend=cfg.backend, obs=cfg.obs_config(),
                           game_loops=loops)
     n = len(ids)
     tp, fp, fn = np.zeros(n, int), np.zeros(n, int), np.zeros(n, int)

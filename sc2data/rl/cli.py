@@ -29,7 +29,11 @@ def train_cmd(
     mem: Optional[Path] = typer.Option(None, "--mem", help="Trained MEM run (sc2data train "
                                                             "--out), for --reward narration."),
     steps: int = typer.Option(10_000, "--steps", help="Decisions to train for, over all envs."),
-    envs: int = typer.Option(1, "--envs", help="Parallel environments (subprocesses if > 1)."),
+    envs: int = typer.Option(1, "--envs", help="Games stepped together (one batched policy "
+                                               "and reward call per step)."),
+    processes: Optional[int] = typer.Option(
+        None, "--processes", help="Worker processes stepping the games (0: in this process) "
+                                  "[one per core; none for one env]."),
     seed: int = typer.Option(0, "--seed", help="Seed of the policy and the environments."),
     bonus: Optional[float] = typer.Option(
         None, "--bonus", help="Shaping bonus: per rule firing (rules) [0.1] or per matched "
@@ -44,6 +48,14 @@ def train_cmd(
     batch_size: int = typer.Option(64, "--batch-size", help="PPO minibatch size."),
     checkpoint_every: int = typer.Option(2048, "--checkpoint-every",
                                          help="Decisions between checkpoints."),
+    obs: str = typer.Option("compact", "--obs", help="What the policy sees: compact (one-hot "
+                                                     "unit types, few layers) or stored (the "
+                                                     "stored schema's layers)."),
+    obs_size: int = typer.Option(64, "--obs-size", help="compact: 64 or 32 pixels a side."),
+    minimap: bool = typer.Option(False, "--minimap/--no-minimap",
+                                 help="compact: add the minimap's channels."),
+    device: str = typer.Option("auto", "--device", help="Policy and MEM on cpu, cuda or auto "
+                                                        "(cuda where a GPU is present)."),
     progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",
                                             help="Progress bar [default: on a terminal]."),
 ) -> None:
@@ -56,7 +68,8 @@ def train_cmd(
                    mem=None if mem is None else str(mem), steps=steps, envs=envs, seed=seed,
                    bonus=bonus, threshold=threshold, patience=patience,
                    episode_steps=episode_steps, rollout=rollout, batch_size=batch_size,
-                   checkpoint_every=checkpoint_every, progress=progress)
+                   checkpoint_every=checkpoint_every, obs=obs, obs_size=obs_size,
+                   minimap=minimap, processes=processes, device=device, progress=progress)
     typer.echo(f"trained {train(cfg)}")
 
 

@@ -36,12 +36,15 @@ send (minerals are waited for, not masked). A call that is unavailable is never 
 ignores the mask) plays ``no_op`` instead, with ``info["invalid"] = True``, and a macro whose next
 call turns out unavailable (say, a barracks still under construction cannot train) ends there.
 
-Observations: a ``Dict`` with one ``Box`` per key of the schema (``Schema.named(layers)``, the
-paper's 13 screen + 7 minimap layers by default) in the stored dtypes, plus its non-spatial
-vectors (``player``, ``score_cumulative``, ``game_loop``) — exactly what ``Schema.extract``
-stores for a frame. The raw pysc2 observations of the last decision are kept in
-:attr:`BuildMarinesGym.frames` for the reward wrappers (never put in ``info``, which vector envs
-pickle every step).
+Observations (:mod:`sc2data.rl.obs`): ``obs="stored"`` (the default here) is a ``Dict`` with one
+``Box`` per key of the schema (``Schema.named(layers)``, the paper's 13 screen + 7 minimap
+layers by default) in the stored dtypes, plus its non-spatial vectors (``player``,
+``score_cumulative``, ``game_loop``) — exactly what ``Schema.extract`` stores for a frame;
+``obs="compact"`` the one-hot encoding made for a small CNN. The raw pysc2 observations of the
+last decision are kept in :attr:`BuildMarinesGym.frames` for the reward wrappers (never put in
+``info``). ``draw`` (feature layer keys) makes the simulator draw only those and what the
+observation and the masks read, the rest left 0: for a caller who knows what it reads (the
+vector env, :mod:`sc2data.rl.vector`).
 
 Seeding: ``reset(seed=s)`` seeds gymnasium's ``np_random``; each episode then draws the
 simulator's seed and the macro generator's seed from it, so the same seed and the same actions
@@ -50,6 +53,7 @@ give the same trajectory, and ``reset()`` without a seed plays the next episode 
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from typing import Any
 
 import gymnasium as gym
@@ -61,7 +65,7 @@ from sc2data.errors import Sc2DataError
 from sc2data.game.agents import ReducedRandomAgent
 from sc2data.game.env import make_env
 from sc2data.game.screen import ScreenView
-from sc2data.schema import Schema
+from sc2data.rl.obs import Observer, ObsConfig
 from sc2data.vocab import SCREEN_SIZE, STEP_MUL
 
 ACTION_SPACES: tuple[str, ...] = ("macro", "paper")
@@ -129,17 +133,6 @@ def macro_feasible(v: ScreenView) -> np.ndarray:
     return np.array([ok[name] for name in MACROS], dtype=bool)
 
 
-def observation_space(schema: Schema) -> spaces.Dict:
-    """One ``Box`` per schema key, in the stored dtype and shape of one frame."""
-    boxes: dict[str, spaces.Space[Any]] = {}
-    for l in schema.layers:
-        n = schema.size(l.group)
-        boxes[l.key] = spaces.Box(0, l.limit - 1, (n, n), l.dtype)
-    for v in schema.vectors:
-        boxes[v.name] = spaces.Box(0, np.iinfo(v.dtype).max, (v.size,), v.dtype)
-    return spaces.Dict(boxes)
-
-
 class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
     """BuildMarines as a gymnasium env; see the module docstring for spaces, counting, masks."""
 
@@ -147,14 +140,14 @@ class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
 
     def __init__(self, action_space: str = "macro", *, backend: str = "sim",
                  layers: str = "paper", game_loops: int | None = None,
-                 step_mul: int = STEP_MUL, **env_kwargs: Any) -> None:
+                 step_mul: int = STEP_MUL, obs: str | ObsConfig = "stored",
+                 draw: Iterable[str] | None = None, **env_kwargs: Any) -> None:
         if action_space not in ACTION_SPACES:
             raise Sc2DataError(f"unknown action space {action_space!r}; choose one of: "
                                f"{', '.join(ACTION_SPACES)}")
-        try:
-            self.schema = Schema.named(layers)
-        except ValueError as e:
-            raise Sc2DataError(str(e)) from None
+        obs_cfg = obs if isinstance(obs, ObsConfig) else ObsConfig(kind=obs, layers=layers)
+        self.observer = Observer(obs_cfg)
+        self.schema = self.observer.schema
         self.kind = action_space
         self.backend = backend
         self.step_mul = step_mul
@@ -163,7 +156,9 @@ class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
             if backend != "sim":
                 raise Sc2DataError("game_loops (a shorter episode) needs the simulator backend")
             self._env_kwargs["game_loops"] = int(game_loops)
-        self.observation_space = observation_space(self.schema)
+        if draw is not None and backend == "sim":
+            self._env_kwargs["layers"] = frozenset(draw) | self.observer.layers
+        self.observation_space = self.observer.space
         if action_space == "macro":
             self.action_space = spaces.Discrete(len(MACROS))
         else:
@@ -259,7 +254,7 @@ class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
         return reward
 
     def _obs(self) -> dict[str, np.ndarray]:
-        return self.schema.extract(self._ts.observation)
+        return self.observer(self._ts.observation)
 
     def _loop(self) -> int:
         return int(np.asarray(self._ts.observation["game_loop"]).reshape(-1)[0])

@@ -1,6 +1,7 @@
-"""The policy's feature extractor: a small CNN over the schema's layers plus the vectors.
+"""The policy's feature extractors: small CNNs over the observation's images plus its vector.
 
-SB3's default ``CombinedExtractor`` would flatten every 64×64 layer into one MLP input (80k
+:class:`StateExtractor` reads the ``stored`` observation (:mod:`sc2data.rl.obs`),
+:class:`CompactExtractor` the ``compact`` one. SB3's default ``CombinedExtractor`` would flatten every 64×64 layer into one MLP input (80k
 inputs with the paper's layers). Instead each layer is scaled to [0, 1] by its pysc2 scale,
 screen and minimap layers go through their own two-layer strided CNN (64 → 16 → 8 pixels), and
 the non-spatial vectors through ``log1p`` and a linear layer; the three are concatenated and
@@ -51,4 +52,36 @@ class StateExtractor(BaseFeaturesExtractor):
             parts.append(cnn(x / getattr(self, f"scale_{g}")))
         v = torch.cat([obs[k].float().clamp(min=0) for k in self.vectors], dim=1)
         parts.append(self.vec(torch.log1p(v)))
+        return self.head(torch.cat(parts, dim=1))  # type: ignore[no-any-return]
+
+
+class CompactExtractor(BaseFeaturesExtractor):
+    """Features of a ``compact`` observation: each image (``screen``, optionally ``minimap``)
+    divided by its channels' ``scales`` (``Observer.scales``) through its own two-layer CNN
+    down to 4×4×32 (an 8×8 stride-8 convolution at 64 pixels, 4×4 stride 4 at 32, to 8×8×32;
+    then a 3×3 stride-2 one), the ``vector`` through a linear layer, the three mapped to
+    ``features_dim``. Small on purpose: PPO's updates are most of a CPU learner's time, and
+    a stride-2 first layer over 16×16 cells doubled their cost (BENCHMARKS.md, "RL at speed")."""
+
+    def __init__(self, observation_space: spaces.Dict, features_dim: int = 256,
+                 scales: dict[str, list[float]] | None = None) -> None:
+        super().__init__(observation_space, features_dim)
+        self.images = [k for k in ("screen", "minimap") if k in observation_space.spaces]
+        self.cnns = nn.ModuleDict()
+        for k in self.images:
+            c, size, _ = observation_space.spaces[k].shape  # type: ignore[misc]
+            scale = torch.tensor((scales or {}).get(k, [255.0] * c), dtype=torch.float32)
+            self.register_buffer(f"scale_{k}", scale.view(1, -1, 1, 1))
+            first = max(1, size // 8)
+            self.cnns[k] = nn.Sequential(
+                nn.Conv2d(c, 32, first, stride=first), nn.ReLU(),
+                nn.Conv2d(32, 32, 3, stride=2, padding=1), nn.ReLU(), nn.Flatten())
+        n_vec = int(observation_space.spaces["vector"].shape[0])  # type: ignore[index]
+        self.vec = nn.Sequential(nn.Linear(n_vec, 64), nn.ReLU())
+        self.head = nn.Sequential(nn.Linear(len(self.images) * 32 * 4 * 4 + 64, features_dim),
+                                  nn.ReLU())
+
+    def forward(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
+        parts = [cnn(obs[k].float() / getattr(self, f"scale_{k}")) for k, cnn in self.cnns.items()]
+        parts.append(self.vec(obs["vector"].float()))
         return self.head(torch.cat(parts, dim=1))  # type: ignore[no-any-return]

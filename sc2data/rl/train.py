@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import functools
 import io
 import json
 import typing
@@ -78,16 +77,37 @@ class RLConfig:
     checkpoint_every: int = 2048
     layers: str = "paper"
     backend: str = "sim"
+    obs: str = "compact"
+    """What the policy sees (:mod:`sc2data.rl.obs`): ``compact`` or ``stored``."""
+    obs_size: int = 64
+    """``compact``: 64 or 32 pixels a side."""
+    minimap: bool = False
+    """``compact``: add the minimap's channels."""
+    processes: int | None = None
+    """Worker processes stepping the games (0: in this process); None: one per core, none for
+    one env. Changes nothing but speed, so it may differ on resume."""
+    device: str = "auto"
+    """Where the policy and the MEM run: ``cpu``, ``cuda`` or ``auto`` (cuda where present)."""
     progress: bool | None = None
 
-    RESUMABLE = ("steps", "progress", "out")
+    RESUMABLE = ("steps", "progress", "out", "processes", "device")
+    LEGACY: typing.ClassVar[dict[str, Any]] = {"obs": "stored", "obs_size": 64, "minimap": False}
+    """Settings added since runs were first written, as those runs had them: a run folder whose
+    ``config.json`` lacks one was trained so."""
+
+    def obs_config(self) -> Any:
+        from sc2data.rl.obs import ObsConfig
+
+        return ObsConfig(kind=self.obs, layers=self.layers, size=self.obs_size,
+                         minimap=self.minimap)
 
     def identity(self) -> dict[str, Any]:
         return {k: v for k, v in dataclasses.asdict(self).items() if k not in self.RESUMABLE}
 
 
 CONFIG_SHAPE: Shape = {name: typing.get_args(hint) or hint for name, hint in
-                      typing.get_type_hints(RLConfig).items() if name not in RLConfig.RESUMABLE}
+                      typing.get_type_hints(RLConfig).items()
+                      if name not in RLConfig.RESUMABLE and name != "LEGACY"}
 """``config.json``: :meth:`RLConfig.identity`, every field of its type."""
 STATE_SHAPE: Shape = {"timesteps": int, "env_steps": int, "episodes": int, "resumes": int}
 """``state.json``: what has been trained so far."""
@@ -99,8 +119,11 @@ def check_values(cfg: RLConfig) -> None:
     from sc2data.rl.rewards import REWARDS
     from sc2data.vocab import BACKENDS, LAYER_SETS
 
+    from sc2data.rl.obs import OBSERVATIONS
+
     for name, known in (("action_space", ACTION_SPACES), ("reward", REWARDS),
-                        ("layers", LAYER_SETS), ("backend", BACKENDS)):
+                        ("layers", LAYER_SETS), ("backend", BACKENDS), ("obs", OBSERVATIONS),
+                        ("device", DEVICES)):
         if getattr(cfg, name) not in known:
             raise Sc2DataError(f"unknown {name.replace('_', ' ')} {getattr(cfg, name)!r}; choose "
                                f"one of: {', '.join(known)}")
@@ -111,6 +134,25 @@ def check_values(cfg: RLConfig) -> None:
         raise Sc2DataError("--episode-steps must be at least 1")
     if not 0 <= cfg.seed < EVAL_SEED - 100_000:
         raise Sc2DataError(f"--seed must lie in [0, {EVAL_SEED - 100_000})")
+    if cfg.processes is not None and cfg.processes < 0:
+        raise Sc2DataError("--processes must be 0 or more")
+    cfg.obs_config().check()
+
+
+DEVICES: tuple[str, ...] = ("auto", "cpu", "cuda")
+
+
+def resolve_device(name: str) -> str:
+    """``cpu`` or ``cuda`` for ``--device`` (``auto``: cuda where a GPU is present); asking for
+    cuda without one is a one-line error."""
+    import torch
+
+    if name == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    if name == "cuda" and not torch.cuda.is_available():
+        raise Sc2DataError("--device cuda: PyTorch sees no CUDA GPU here; use --device cpu "
+                           "(or auto)")
+    return name
 
 
 def check_config(cfg: RLConfig) -> tuple[Any, Any]:
@@ -126,43 +168,55 @@ def check_config(cfg: RLConfig) -> tuple[Any, Any]:
     from sc2data.rl.narration import check_readable, load_narration
 
     narration = load_narration(cfg.narration)
-    scorer = load_model(cfg.mem)
+    scorer = load_model(cfg.mem, device=resolve_device(cfg.device))
     check_readable(narration, scorer)
     return narration, scorer
 
 
 def make_env(cfg: RLConfig, scorer: Any = None, narration: Any = None) -> Any:
-    """One training environment: ``BuildMarinesGym`` under the run's reward wrapper."""
+    """One environment as a gymnasium ``Env``: ``BuildMarinesGym`` under the run's per-game
+    reward wrapper (training uses :func:`make_vec_env`, whose reward is batched)."""
     from sc2data.rl.envs import BuildMarinesGym
     from sc2data.rl.rewards import wrap_reward
-    from sc2data.vocab import STEP_MUL
 
-    loops = cfg.episode_steps * STEP_MUL if cfg.episode_steps else None
-    env = BuildMarinesGym(cfg.action_space, backend=cfg.backend, layers=cfg.layers,
-                          game_loops=loops)
+    env = BuildMarinesGym(cfg.action_space, backend=cfg.backend, obs=cfg.obs_config(),
+                          game_loops=game_loops(cfg))
     if cfg.reward == "narration" and scorer is None:
-        import torch
-
-        from sc2data.model.reward import load_model
-        from sc2data.rl.narration import load_narration
-
-        torch.set_num_threads(1)
-        scorer, narration = load_model(cfg.mem), load_narration(cfg.narration)  # type: ignore[arg-type]
+        narration, scorer = check_config(cfg)
     return wrap_reward(env, cfg.reward, scorer=scorer, narration=narration, bonus=cfg.bonus,
                        threshold=cfg.threshold, patience=cfg.patience)
 
 
-def _env_factory(cfg: RLConfig) -> Any:
-    return make_env(cfg)
+def game_loops(cfg: RLConfig) -> int | None:
+    """The episode length in game loops (None: the map's)."""
+    from sc2data.vocab import STEP_MUL
+
+    return cfg.episode_steps * STEP_MUL if cfg.episode_steps else None
 
 
 def make_vec_env(cfg: RLConfig, scorer: Any = None, narration: Any = None) -> Any:
-    """``cfg.envs`` environments: in this process for one, one subprocess each for more."""
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+    """``cfg.envs`` games as one :class:`~sc2data.rl.vector.BuildMarinesVecEnv`, stepped by
+    ``cfg.processes`` worker processes, the run's reward batched in this process."""
+    from sc2data.rl.batched import make_shaping
+    from sc2data.rl.vector import BuildMarinesVecEnv, GameConfig
 
-    if cfg.envs == 1:
-        return DummyVecEnv([lambda: make_env(cfg, scorer, narration)])
-    return SubprocVecEnv([functools.partial(_env_factory, cfg) for _ in range(cfg.envs)])
+    if cfg.reward == "narration" and scorer is None:
+        narration, scorer = check_config(cfg)
+    shaping = make_shaping(cfg.reward, scorer=scorer, narration=narration, bonus=cfg.bonus,
+                           threshold=cfg.threshold, patience=cfg.patience)
+    game = GameConfig(cfg.action_space, cfg.backend, cfg.obs_config(), game_loops(cfg))
+    return BuildMarinesVecEnv(game, cfg.envs, processes=cfg.processes, shaping=shaping)
+
+
+def policy_kwargs(cfg: RLConfig) -> dict[str, Any]:
+    """The policy network: the feature extractor of the run's observation."""
+    from sc2data.rl.obs import Observer
+    from sc2data.rl.policy import CompactExtractor, StateExtractor
+
+    if cfg.obs == "stored":
+        return {"features_extractor_class": StateExtractor}
+    return {"features_extractor_class": CompactExtractor,
+            "features_extractor_kwargs": {"scales": Observer(cfg.obs_config()).scales()}}
 
 
 def _read_json(path: Path, shape: Shape) -> dict[str, Any]:
@@ -178,6 +232,22 @@ def _read_json(path: Path, shape: Shape) -> dict[str, Any]:
 
 def _write_json(path: Path, data: Any) -> None:
     write_atomic(path, (json.dumps(data, indent=1, sort_keys=True) + "\n").encode())
+
+
+def read_config(run: Path) -> dict[str, Any]:
+    """A run's ``config.json``, checked; settings added since it was written read as the run
+    had them (:attr:`RLConfig.LEGACY`)."""
+    path = run / "config.json"
+    try:
+        record = json.loads(path.read_text())
+    except (OSError, ValueError) as e:
+        raise Sc2DataError(f"cannot read {path}: {e}; delete {run} and train it again, or pick "
+                           f"another --out") from None
+    if isinstance(record, dict):
+        record = {**RLConfig.LEGACY, **record}
+    check_record(record, CONFIG_SHAPE, path, f"delete {run} and train it again, or pick "
+                                             f"another --out")
+    return record  # type: ignore[no-any-return]
 
 
 def read_curve(run: Path) -> list[dict[str, float]]:
@@ -206,7 +276,7 @@ def train(cfg: RLConfig) -> Path:
     run = Path(cfg.out)
     state: dict[str, Any] = {"timesteps": 0, "env_steps": 0, "episodes": 0, "resumes": 0}
     if (run / "config.json").is_file():
-        old = _read_json(run / "config.json", CONFIG_SHAPE)
+        old = read_config(run)
         if old != cfg.identity():
             diff = sorted(k for k in set(old) | set(cfg.identity())
                           if old.get(k) != cfg.identity().get(k))
@@ -226,9 +296,9 @@ def train(cfg: RLConfig) -> Path:
     from stable_baselines3.common.callbacks import BaseCallback
 
     from sc2data.progress import bar
-    from sc2data.rl.policy import StateExtractor
 
     torch.set_num_threads(1)
+    device = resolve_device(cfg.device)
     run.mkdir(parents=True, exist_ok=True)
     _write_json(run / "config.json", cfg.identity())
     rows = [r for r in read_curve(run) if r["timesteps"] <= state["timesteps"]]
@@ -236,14 +306,13 @@ def train(cfg: RLConfig) -> Path:
     vec = make_vec_env(cfg, scorer, narration)
     try:
         if state["timesteps"]:
-            model = MaskablePPO.load(run / "model.zip", env=vec, device="cpu")
+            model = MaskablePPO.load(run / "model.zip", env=vec, device=device)
             model.set_random_seed(seed)
         else:
             model = MaskablePPO(
                 "MultiInputPolicy", vec, n_steps=cfg.rollout, batch_size=cfg.batch_size,
                 n_epochs=4, learning_rate=3e-4, gamma=0.99, ent_coef=0.01, seed=seed,
-                device="cpu", verbose=0,
-                policy_kwargs={"features_extractor_class": StateExtractor})
+                device=device, verbose=0, policy_kwargs=policy_kwargs(cfg))
 
         class Curve(BaseCallback):
             """Episode rows, the progress bar and periodic checkpoints."""
@@ -303,7 +372,7 @@ def load_config(run: Path) -> RLConfig:
     if not (run / "config.json").is_file() or not (run / "model.zip").is_file():
         raise Sc2DataError(f"{run} is not a trained sc2data rl run (no config.json and "
                            f"model.zip); train one with sc2data rl train --out {run}")
-    data = _read_json(run / "config.json", CONFIG_SHAPE)
+    data = read_config(run)
     cfg = RLConfig(out=str(run), **{k: data[k] for k in CONFIG_SHAPE})
     try:
         check_values(cfg)
@@ -327,13 +396,11 @@ def evaluate(run: Path, episodes: int = 10, deterministic: bool = True,
 
     from sc2data.progress import bar
     from sc2data.rl.envs import BuildMarinesGym
-    from sc2data.vocab import STEP_MUL
 
     torch.set_num_threads(1)
     model = MaskablePPO.load(run / "model.zip", device="cpu")
-    loops = cfg.episode_steps * STEP_MUL if cfg.episode_steps else None
-    env = BuildMarinesGym(cfg.action_space, backend=cfg.backend, layers=cfg.layers,
-                          game_loops=loops)
+    env = BuildMarinesGym(cfg.action_space, backend=cfg.backend, obs=cfg.obs_config(),
+                          game_loops=game_loops(cfg))
     marines: list[int] = []
     with bar(episodes, desc="rl evaluate", unit="episode", show=progress) as b:
         for e in range(episodes):
@@ -391,7 +458,7 @@ def plot(runs: Sequence[Path], out: Path, window: int = 10, group: bool = False)
         rows = read_curve(run)
         if not rows:
             raise Sc2DataError(f"{run} has no finished training episode to plot yet")
-        curves.append((run, _read_json(run / "config.json", CONFIG_SHAPE), rows))
+        curves.append((run, read_config(run), rows))
     if window < 1:
         raise Sc2DataError("--window must be at least 1")
     import matplotlib

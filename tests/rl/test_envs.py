@@ -116,24 +116,3 @@ def test_bad_settings_are_errors() -> None:
         BuildMarinesGym("full")
     with pytest.raises(Sc2DataError, match="unknown layer set"):
         BuildMarinesGym("macro", layers="tiny")
-
-
-def test_subproc_vec_env_with_masks() -> None:
-    from stable_baselines3.common.vec_env import SubprocVecEnv
-
-    from sc2data.rl.train import RLConfig, _env_factory
-
-    cfg = RLConfig(out="unused", episode_steps=20)
-    import functools
-
-    vec = SubprocVecEnv([functools.partial(_env_factory, cfg) for _ in range(2)])
-    try:
-        vec.seed(0)
-        obs = vec.reset()
-        assert obs["screen/unit_type"].shape == (2, 64, 64)
-        masks = np.stack(vec.env_method("action_masks"))
-        assert masks.shape == (2, len(MACROS)) and masks[:, -1].all()
-        _, rewards, _, infos = vec.step(np.array([5, 5]))
-        assert all("game_reward" in i for i in infos) and rewards.shape == (2,)
-    finally:
-        vec.close()

@@ -33,10 +33,12 @@ class BuildMarinesEnv(environment.Base):
         the same actions give identical observations. ``None`` draws a seed from the OS.
       step_mul: game loops per agent step (pysc2's default and the paper's: 8).
       game_loops: episode length in game loops (the map's 900-second timer: 14,400).
+      layers: draw only these feature layers (``"screen/unit_type"``, ...; see
+        :class:`~sc2data.game.sim.observe.Renderer`), the rest left 0; ``None`` draws all.
     """
 
     def __init__(self, seed: int | None = None, step_mul: int = STEP_MUL,
-                 game_loops: int = md.GAME_LOOPS) -> None:
+                 game_loops: int = md.GAME_LOOPS, layers: frozenset[str] | None = None) -> None:
         if step_mul <= 0:
             raise ValueError("step_mul should be positive, got {}".format(step_mul))
         self._step_mul = int(step_mul)
@@ -45,7 +47,7 @@ class BuildMarinesEnv(environment.Base):
         self._features = features.Features(interface_format(), map_name=MAP_NAME)
         self._game = Game(self._seed)
         self._commands = Commands(self._game)
-        self._renderer = Renderer()
+        self._renderer = Renderer(layers)
         self._state = environment.StepType.LAST
         self._available: list[int] = []
         self._last_score = 0

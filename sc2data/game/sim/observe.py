@@ -182,10 +182,21 @@ def _runs(rows: list[int]) -> list[tuple[int, int]]:
     return out
 
 
-class Renderer:
-    """Draws a :class:`Game` into pysc2-shaped feature arrays."""
+ENV_SCREEN: frozenset[str] = frozenset({"unit_type", "player_relative", "selected", "buildable"})
+"""Screen layers the simulator's own users read (``ScreenView``: masks, the macro agents), always
+drawn when a :class:`Renderer` draws only some layers."""
 
-    def __init__(self) -> None:
+
+class Renderer:
+    """Draws a :class:`Game` into pysc2-shaped feature arrays.
+
+    ``layers`` (pysc2 names as ``"screen/unit_type"``, ``"minimap/camera"``) draws only those
+    (and :data:`ENV_SCREEN`); every other layer is left 0, the minimap entirely so when none of
+    its layers is asked for. ``None`` (the default) draws all 27 + 11, as pysc2 returns them.
+    An RL learner reading a few layers skips the rest of the work (BENCHMARKS.md, "RL at speed").
+    """
+
+    def __init__(self, layers: frozenset[str] | None = None) -> None:
         playable = md.playable_cells()
         srows, scols = md.screen_pixel_cells()
         mrows, mcols = md.minimap_pixel_cells()
@@ -225,6 +236,14 @@ class Renderer:
         self.progress = np.zeros(0)
         self._attr_key: tuple[object, int] | None = None  # (table, its version) drawn last
         self._progressing = True  # whether something was being built then
+        want = None if layers is None else {k for k in layers} | {f"screen/{n}" for n in ENV_SCREEN}
+        self._unit_rows = [(row, i) for row, i in enumerate(_UNIT_SCREEN)
+                           if want is None or f"screen/{S[i].name}" in want]
+        self._density = want is None or "screen/unit_density" in want
+        self._density_aa = want is None or "screen/unit_density_aa" in want
+        self._minimap_on = want is None or any(k.startswith("minimap/") for k in want)
+        self._minimap_off = np.zeros_like(self.minimap_base)
+        self._minimap_off.flags.writeable = False
 
     # ------------------------------------------------------------------ static part
 
@@ -275,18 +294,20 @@ class Renderer:
         for lo, hi in self._terrain_runs:
             screen[lo:hi] = self.screen_base[lo:hi]
         flat = screen.reshape(len(S), _N * _N)
-        for row, layer in enumerate(_UNIT_SCREEN):
+        for row, layer in self._unit_rows:
             attr[row].take(top, out=flat[layer], mode="clip")
         # Density and coverage are summed in int64 / float64 and cast into the int32 rows by the
         # last operation itself (``casting="unsafe"``: what assigning them would do).
         n = disk.sentinel + 1
-        np.add(disk.crop(np.bincount(inside.ravel(), minlength=n)), self._s_static.density2d,
-               out=screen[S.unit_density.index], casting="unsafe")
-        aa = disk.crop(np.bincount(covered.ravel(), weights=cov.ravel(), minlength=n)) + \
-            self._s_static.aa2d
-        aa *= 16.0
-        aa += 0.5
-        np.minimum(aa, 255.0, out=screen[S.unit_density_aa.index], casting="unsafe")
+        if self._density:
+            np.add(disk.crop(np.bincount(inside.ravel(), minlength=n)), self._s_static.density2d,
+                   out=screen[S.unit_density.index], casting="unsafe")
+        if self._density_aa:
+            aa = disk.crop(np.bincount(covered.ravel(), weights=cov.ravel(), minlength=n)) + \
+                self._s_static.aa2d
+            aa *= 16.0
+            aa += 0.5
+            np.minimum(aa, 255.0, out=screen[S.unit_density_aa.index], casting="unsafe")
         return screen, top
 
     def _ids(self, slots: np.ndarray, k: int) -> np.ndarray:
@@ -355,4 +376,6 @@ class Renderer:
         np.subtract(md.SCREEN_Y0, wy, out=xy[1])
         xy *= md.PX_PER_UNIT
         screen, top = self._screen(slots, xy, attr)
-        return screen, self._minimap(g, attr, slots, wx, wy), top.reshape(_N, _N)
+        minimap = self._minimap(g, attr, slots, wx, wy) if self._minimap_on else \
+            self._minimap_off
+        return screen, minimap, top.reshape(_N, _N)

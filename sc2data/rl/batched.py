@@ -1,0 +1,135 @@
+"""The shaping rewards of :mod:`sc2data.rl.rewards`, for every game of a vector env at once.
+
+:class:`~sc2data.rl.vector.BuildMarinesVecEnv` hands a shaping object, once per vector step, the
+pysc2 frames of each game's last decision (its first frame the previous decision's last, then
+one per pysc2 step; the arrays the worker processes wrote) and which games ended. The object
+forms every game's two-frame stacks, judges them all in one batch (one MEM call for the
+narration reward) and returns each game's bonus. The bonuses are those of the per-game wrappers
+(:class:`~sc2data.rl.rewards.RuleShaping`, :class:`~sc2data.rl.rewards.NarrationShaping`) on the
+same frames, narration state included (tests/rl/test_vector.py holds this).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from sc2data.errors import Sc2DataError
+from sc2data.rl.narration import Narration, check_readable
+from sc2data.rulebase import Rule, schema_for
+from sc2data.schema import Schema, StackBatch
+
+
+def decision_stacks(frames: Mapping[str, np.ndarray], n_frames: np.ndarray, schema: Schema
+                    ) -> tuple[StackBatch, np.ndarray]:
+    """Every game's two-frame stacks of its last decision, game by game in order, and how many
+    each game has. ``frames[key]`` is ``(games, slots, …)``; game i's frames are its first
+    ``n_frames[i]`` slots."""
+    counts = np.maximum(np.asarray(n_frames, dtype=np.int64) - 1, 0)
+    keys = schema.keys()
+    if len(counts) and (counts == 1).all():  # one pysc2 step each: the first two slots, as is
+        return StackBatch({k: frames[k][:, :2] for k in keys}, schema), counts
+    game = np.repeat(np.arange(len(counts)), counts)
+    starts = np.cumsum(counts) - counts
+    j = np.arange(int(counts.sum())) - np.repeat(starts, counts) + 1
+    arrays = {k: np.stack((frames[k][game, j - 1], frames[k][game, j]), axis=1) for k in keys}
+    return StackBatch(arrays, schema), counts
+
+
+class BatchedRules:
+    """:class:`~sc2data.rl.rewards.RuleShaping` for all games: ``bonus`` per rule firing on
+    each stack of the decision."""
+
+    def __init__(self, *, bonus: float = 0.1, rule_ids: Sequence[str] | None = None) -> None:
+        from sc2data.labels.registry import load_registry
+
+        self.bonus = float(bonus)
+        self.rules: list[Rule] = [e.rule for e in load_registry().select(rule_ids)]
+        self.schema = schema_for(k for r in self.rules for k in r.requires if "/" in k)
+
+    def reset(self, n: int) -> None:
+        """A new vector of ``n`` games (nothing to remember between decisions)."""
+
+    def __call__(self, frames: Mapping[str, np.ndarray], n_frames: np.ndarray,
+                 done: np.ndarray) -> tuple[np.ndarray, list[dict[str, Any]]]:
+        batch, counts = decision_stacks(frames, n_frames, self.schema)
+        fired = np.zeros(len(batch), dtype=np.int64)
+        for rule in self.rules:
+            fired += np.asarray(rule(batch), dtype=bool)
+        game = np.repeat(np.arange(len(counts)), counts)
+        per_game = np.bincount(game, weights=fired, minlength=len(counts))
+        return self.bonus * per_game, [{} for _ in counts]
+
+
+class BatchedNarration:
+    """:class:`~sc2data.rl.rewards.NarrationShaping` for all games: each game's current command
+    ``k`` advances (and pays ``bonus``) on the first of its stacks, in order, the MEM puts within
+    ``threshold`` of it; ``patience`` > 0 skips a command not matched in that many decisions; a
+    game that ends starts its narration again. Every stack is scored against every command of
+    the narration in one MEM call (the state embedding is the cost; the commands are cached)."""
+
+    def __init__(self, scorer: Any, narration: Narration, *, bonus: float = 1.0,
+                 threshold: float = 0.5, patience: int = 0) -> None:
+        if not narration.commands:
+            raise Sc2DataError("the narration holds no command")
+        if patience < 0:
+            raise Sc2DataError(f"patience must be 0 or more, got {patience}")
+        check_readable(narration, scorer)
+        self.scorer, self.narration = scorer, narration
+        self.commands = list(narration.commands)
+        self.bonus, self.threshold, self.patience = float(bonus), float(threshold), int(patience)
+        self.schema: Schema = scorer.schema
+        scorer.embed_texts(self.commands)
+        self.index = np.zeros(0, dtype=np.int64)
+        self.waited = np.zeros(0, dtype=np.int64)
+
+    def reset(self, n: int) -> None:
+        """A new vector of ``n`` games: every narration at its first command."""
+        self.index = np.zeros(n, dtype=np.int64)
+        self.waited = np.zeros(n, dtype=np.int64)
+
+    def __call__(self, frames: Mapping[str, np.ndarray], n_frames: np.ndarray,
+                 done: np.ndarray) -> tuple[np.ndarray, list[dict[str, Any]]]:
+        batch, counts = decision_stacks(frames, n_frames, self.schema)
+        m = len(self.commands)
+        hit = (np.asarray(self.scorer.distances(batch, self.commands)) < self.threshold
+               if len(batch) else np.zeros((0, m), dtype=bool))
+        bonus = np.zeros(len(counts))
+        infos: list[dict[str, Any]] = []
+        end = np.cumsum(counts)
+        for i, n in enumerate(counts):
+            mine = hit[end[i] - n:end[i]]
+            k, start, matched = int(self.index[i]), 0, False
+            while start < n:
+                js = np.flatnonzero(mine[start:, k])
+                if not len(js):
+                    break
+                bonus[i] += self.bonus
+                matched = True
+                k = (k + 1) % m
+                start += int(js[0]) + 1
+            waited = 0 if matched else int(self.waited[i]) + 1
+            if self.patience and waited >= self.patience:
+                k, waited = (k + 1) % m, 0
+            infos.append({"narration_index": k})
+            self.index[i], self.waited[i] = (0, 0) if done[i] else (k, waited)
+        return bonus, infos
+
+
+def make_shaping(reward: str, *, scorer: Any = None, narration: Narration | None = None,
+                 bonus: float | None = None, threshold: float = 0.5, patience: int = 0) -> Any:
+    """The batched shaping of ``reward`` (None for the game's sparse reward)."""
+    from sc2data.rl.rewards import REWARDS
+
+    if reward == "sparse":
+        return None
+    if reward == "rules":
+        return BatchedRules(bonus=0.1 if bonus is None else bonus)
+    if reward == "narration":
+        if scorer is None or narration is None:
+            raise Sc2DataError("the narration reward needs a MEM run (--mem) and a narration")
+        return BatchedNarration(scorer, narration, bonus=1.0 if bonus is None else bonus,
+                                threshold=threshold, patience=patience)
+    raise Sc2DataError(f"unknown reward {reward!r}; choose one of: {', '.join(REWARDS)}")

@@ -1,0 +1,489 @@
+"""Many BuildMarines games stepped together: one batched call, arrays in shared memory.
+
+:class:`BuildMarinesVecEnv` is a vector of ``n`` :class:`~sc2data.rl.envs.BuildMarinesGym`
+games behind SB3's ``VecEnv`` interface (MaskablePPO trains on it unchanged; ``action_masks``
+comes batched, read from memory, not asked of each game). The games are split over ``processes``
+worker processes (0: all in this process), each stepping its share one after another and
+writing observations, masks, the game's reward, the episode's end and the pysc2 frames of each
+decision straight into preallocated arrays. Those arrays live in one shared-memory file
+(:mod:`sc2data.rl.arena`) that every process maps: a vector step sends each worker one short
+message and nothing else crosses a pipe (EnvPool, Sample Factory and PufferLib work so).
+
+The reward is computed here, in the learner's process, once per vector step for all games
+(:mod:`sc2data.rl.batched`): the narration reward scores every game's new two-frame stacks in one
+MEM call, from the frames the workers already extracted; one MEM is loaded, not one per worker.
+
+Semantics are those of SB3's ``DummyVecEnv`` over the same games: game ``i`` is reset with
+``seed + i`` after :meth:`seed` (then continues its own stream), a game that ends is reset at
+once and its last observation is ``info["terminal_observation"]``; the same seed and the same
+``n`` give the same trajectories whatever ``processes`` is. Each game's ``info`` carries
+``game_reward``, ``shaping``, ``env_steps``, ``invalid``, ``game_loop`` and ``marines`` as
+:class:`~sc2data.rl.envs.BuildMarinesGym` and the reward wrappers give them.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import signal
+import threading
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from multiprocessing.connection import Connection
+from typing import Any
+
+import gymnasium.vector as gym_vector
+import numpy as np
+from gymnasium import spaces
+from stable_baselines3.common.vec_env.base_vec_env import VecEnv
+
+from sc2data.errors import Sc2DataError
+from sc2data.files import one_line
+from sc2data.game.agents import ReducedRandomAgent
+from sc2data.rl.arena import Arena, Field
+from sc2data.rl.envs import BuildMarinesGym
+from sc2data.rl.obs import ObsConfig, Observer
+from sc2data.schema import Schema
+
+MAX_MACRO_STEPS = ReducedRandomAgent.PATIENCE + 4
+"""Most pysc2 steps one macro decision can take: the wait for minerals, then its calls."""
+
+
+@dataclass(frozen=True)
+class GameConfig:
+    """What every game of a vector is (picklable: sent to the worker processes)."""
+
+    action_space: str = "macro"
+    backend: str = "sim"
+    obs: ObsConfig = field(default_factory=ObsConfig)
+    game_loops: int | None = None
+    """Episode length in game loops (simulator only); None: the map's 14,400."""
+    frames: Schema | None = None
+    """The layers and vectors of each decision's pysc2 frames kept for the reward (None: none)."""
+
+    def make(self) -> BuildMarinesGym:
+        draw = None if self.frames is None else frozenset(l.key for l in self.frames.layers)
+        if self.frames is None and self.backend == "sim":
+            draw = frozenset()
+        return BuildMarinesGym(self.action_space, backend=self.backend, obs=self.obs,
+                               game_loops=self.game_loops, draw=draw)
+
+    def max_steps(self) -> int:
+        return 1 if self.action_space == "paper" else MAX_MACRO_STEPS
+
+
+def layout(cfg: GameConfig, n: int, env: BuildMarinesGym) -> list[Field]:
+    """The shared arrays of a vector of ``n`` games like ``env``."""
+    obs_space = env.observation_space
+    assert isinstance(obs_space, spaces.Dict)
+    fields: list[Field] = []
+    for k, b in obs_space.spaces.items():
+        fields.append(Field(f"obs/{k}", (n, *b.shape), np.dtype(b.dtype)))
+        fields.append(Field(f"final/{k}", (n, *b.shape), np.dtype(b.dtype)))
+    act = env.action_space
+    if isinstance(act, spaces.Discrete):
+        n_act, n_mask = 1, int(act.n)
+    else:
+        assert isinstance(act, spaces.MultiDiscrete)
+        n_act, n_mask = len(act.nvec), int(np.sum(act.nvec))
+    fields += [Field("actions", (n, n_act), np.dtype(np.int64)),
+               Field("masks", (n, n_mask), np.dtype(bool)),
+               Field("game_reward", (n,), np.dtype(np.float64)),
+               Field("done", (n,), np.dtype(bool)),
+               Field("invalid", (n,), np.dtype(bool)),
+               Field("env_steps", (n,), np.dtype(np.int32)),
+               Field("game_loop", (n,), np.dtype(np.int32)),
+               Field("marines", (n,), np.dtype(np.int32)),
+               Field("n_frames", (n,), np.dtype(np.int32))]
+    if cfg.frames is not None:
+        f = cfg.max_steps() + 1
+        for l in cfg.frames.layers:
+            side = cfg.frames.size(l.group)
+            fields.append(Field(f"frames/{l.key}", (n, f, side, side), l.dtype))
+        for v in cfg.frames.vectors:
+            fields.append(Field(f"frames/{v.name}", (n, f, v.size), v.dtype))
+    return fields
+
+
+class FrameWriter:
+    """A pysc2 observation's layers and vectors of a schema, copied into arrays without the
+    range checks of ``Schema.extract`` (the simulator draws every layer within its scale)."""
+
+    def __init__(self, schema: Schema) -> None:
+        self.screen = [(l.key, l.index) for l in schema.screen]
+        self.minimap = [(l.key, l.index) for l in schema.minimap]
+        self.vectors = [(v.name, v.size) for v in schema.vectors]
+
+    def __call__(self, obs: Any, arrays: dict[str, np.ndarray], i: int, j: int) -> None:
+        screen, minimap = obs["feature_screen"], obs["feature_minimap"]
+        for key, index in self.screen:
+            arrays[key][i, j] = screen[index]
+        for key, index in self.minimap:
+            arrays[key][i, j] = minimap[index]
+        for name, _ in self.vectors:
+            arrays[name][i, j] = np.asarray(obs[name]).reshape(-1)
+
+
+class GameSlice:
+    """Games ``lo`` to ``hi`` of a vector, stepped in this process, writing into ``arrays``."""
+
+    def __init__(self, cfg: GameConfig, lo: int, hi: int, arrays: dict[str, np.ndarray]) -> None:
+        self.cfg, self.lo, self.hi, self.a = cfg, lo, hi, arrays
+        self.envs = [cfg.make() for _ in range(lo, hi)]
+        self.obs_keys = [k[4:] for k in arrays if k.startswith("obs/")]
+        self.frames = {k[7:]: a for k, a in arrays.items() if k.startswith("frames/")}
+        self.write_frame = FrameWriter(cfg.frames) if cfg.frames is not None else None
+        self.max_steps = cfg.max_steps()
+
+    def reset(self, seeds: Sequence[int | None]) -> None:
+        for j, env in enumerate(self.envs):
+            i = self.lo + j
+            obs, info = env.reset(seed=seeds[j])
+            for k in self.obs_keys:
+                self.a[f"obs/{k}"][i] = obs[k]
+            self.a["masks"][i] = env.action_masks()
+            self.a["game_loop"][i] = info["game_loop"]
+            self.a["marines"][i] = info["marines"]
+            self.a["done"][i] = self.a["invalid"][i] = False
+            self.a["game_reward"][i] = 0.0
+            self.a["env_steps"][i] = 0
+            self._frames(i, env)
+
+    def step(self) -> None:
+        actions = self.a["actions"]
+        for j, env in enumerate(self.envs):
+            i = self.lo + j
+            action = actions[i, 0] if actions.shape[1] == 1 else actions[i]
+            obs, reward, terminated, truncated, info = env.step(action)
+            self._frames(i, env)
+            a = self.a
+            a["game_reward"][i] = reward
+            a["invalid"][i] = info["invalid"]
+            a["env_steps"][i] = info["env_steps"]
+            a["game_loop"][i] = info["game_loop"]
+            a["marines"][i] = info["marines"]
+            done = terminated or truncated
+            a["done"][i] = done
+            if done:
+                for k in self.obs_keys:
+                    a[f"final/{k}"][i] = obs[k]
+                obs, _ = env.reset()
+            for k in self.obs_keys:
+                a[f"obs/{k}"][i] = obs[k]
+            a["masks"][i] = env.action_masks()
+
+    def _frames(self, i: int, env: BuildMarinesGym) -> None:
+        n = len(env.frames)
+        self.a["n_frames"][i] = n
+        if self.write_frame is None:
+            return
+        if n > self.max_steps + 1:
+            raise Sc2DataError(f"a decision took {n - 1} pysc2 steps, more than the "
+                               f"{self.max_steps} the vector env holds frames for")
+        for j, f in enumerate(env.frames):
+            self.write_frame(f, self.frames, i, j)
+
+    def close(self) -> None:
+        for env in self.envs:
+            env.close()
+
+
+def _serve(conn: Connection, cfg: GameConfig, lo: int, hi: int, path: str,
+           fields: list[Field]) -> None:
+    """A worker process: games ``lo`` to ``hi`` over the arena at ``path``, one pipe message
+    per vector step; errors go back as one line. It ends when the learner closes the pipe."""
+    games = None
+    try:
+        arena = Arena.attach(path, fields)
+        games = GameSlice(cfg, lo, hi, arena.arrays)
+        conn.send(("ready", None))
+        while True:
+            cmd, arg = conn.recv()
+            if cmd == "step":
+                games.step()
+            elif cmd == "reset":
+                games.reset(arg)
+            elif cmd == "close":
+                break
+            conn.send(("ok", None))
+    except (EOFError, BrokenPipeError, KeyboardInterrupt):
+        pass
+    except BaseException as e:  # noqa: BLE001 - reported to the learner as one line
+        try:
+            conn.send(("error", one_line(e)))
+        except (BrokenPipeError, OSError):
+            pass
+    finally:
+        if games is not None:
+            games.close()
+
+
+def default_processes(n: int) -> int:
+    """Worker processes for ``n`` games: none for one game, else one per core, at most ``n``."""
+    if n <= 1:
+        return 0
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        cores = os.cpu_count() or 1
+    return max(1, min(n, cores))
+
+
+class BuildMarinesVecEnv(VecEnv):
+    """``n`` BuildMarines games as one SB3 ``VecEnv`` (see the module docstring).
+
+    ``shaping`` (:mod:`sc2data.rl.batched`) adds its bonus to the game's reward and reads the
+    frames of its schema; ``None`` is the game's sparse reward.
+    """
+
+    def __init__(self, cfg: GameConfig, n: int, *, processes: int | None = None,
+                 shaping: Any = None) -> None:
+        if n < 1:
+            raise Sc2DataError("--envs must be at least 1")
+        if shaping is not None and cfg.frames is None:
+            cfg = GameConfig(cfg.action_space, cfg.backend, cfg.obs, cfg.game_loops,
+                             shaping.schema)
+        self.cfg, self.shaping = cfg, shaping
+        k = default_processes(n) if processes is None else int(processes)
+        if k < 0:
+            raise Sc2DataError("--processes must be 0 or more")
+        self.processes = min(k, n)
+        probe = cfg.make()
+        fields = layout(cfg, n, probe)
+        obs_space, act_space = probe.observation_space, probe.action_space
+        self._conns: list[Connection] = []
+        self._procs: list[Any] = []
+        self._local: GameSlice | None = None
+        self.arena = Arena.private(fields) if self.processes == 0 else Arena.create(fields)
+        try:
+            if self.processes == 0:
+                probe.close()
+                self._local = GameSlice(cfg, 0, n, self.arena.arrays)
+            else:
+                probe.close()
+                self._start(cfg, n, fields)
+        except BaseException:
+            self.close()
+            raise
+        finally:
+            self.arena.unlink()
+        self.a = self.arena.arrays
+        self.obs_keys = [k[4:] for k in self.a if k.startswith("obs/")]
+        self.frame_arrays = {k[7:]: v for k, v in self.a.items() if k.startswith("frames/")}
+        self._closed = False
+        super().__init__(n, obs_space, act_space)
+
+    # -- processes -------------------------------------------------------------------------------
+
+    def _start(self, cfg: GameConfig, n: int, fields: list[Field]) -> None:
+        ctx = mp.get_context("spawn")
+        bounds = np.linspace(0, n, self.processes + 1).round().astype(int)
+        main = threading.current_thread() is threading.main_thread()
+        # Workers ignore Ctrl-C from their first instruction (the disposition survives exec, and
+        # Python keeps an ignored SIGINT): the learner stops them, so no worker traceback.
+        old = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+        try:
+            for lo, hi in zip(bounds[:-1], bounds[1:]):
+                mine, theirs = ctx.Pipe()
+                p = ctx.Process(target=_serve, args=(theirs, cfg, int(lo), int(hi),
+                                                     self.arena.path, fields), daemon=True)
+                p.start()
+                theirs.close()
+                self._conns.append(mine)
+                self._procs.append(p)
+        finally:
+            if main:
+                signal.signal(signal.SIGINT, old)
+        self._collect()
+
+    def _send(self, cmd: str, args: Sequence[Any] | None = None) -> None:
+        if self._local is not None:
+            if cmd == "step":
+                self._local.step()
+            elif cmd == "reset":
+                self._local.reset(args[0] if args else [None] * self.num_envs)
+            return
+        for j, (conn, p) in enumerate(zip(self._conns, self._procs)):
+            try:
+                conn.send((cmd, None if args is None else args[j]))
+            except (BrokenPipeError, ConnectionResetError):
+                self._died(p)
+
+    def _died(self, p: Any) -> None:
+        p.join(timeout=1)
+        self.close()
+        raise Sc2DataError(f"an environment process ended unexpectedly (exit code "
+                           f"{p.exitcode}); rerun the same command to resume") from None
+
+    def _collect(self) -> None:
+        for conn, p in zip(self._conns, self._procs):
+            try:
+                kind, msg = conn.recv()
+            except (EOFError, ConnectionResetError):
+                self._died(p)
+            if kind == "error":
+                self.close()
+                raise Sc2DataError(f"environment process: {msg}")
+
+    def _per_worker(self, values: Sequence[Any]) -> list[list[Any]]:
+        if self._local is not None:
+            return [list(values)]
+        bounds = np.linspace(0, self.num_envs, self.processes + 1).round().astype(int)
+        return [list(values[lo:hi]) for lo, hi in zip(bounds[:-1], bounds[1:])]
+
+    # -- VecEnv ----------------------------------------------------------------------------------
+
+    def reset(self) -> dict[str, np.ndarray]:
+        self._send("reset", self._per_worker(self._seeds))
+        if self._local is None:
+            self._collect()
+        self._reset_seeds()
+        if self.shaping is not None:
+            self.shaping.reset(self.num_envs)
+        self.reset_infos = [{"game_reward": 0.0, "env_steps": 0,
+                             "game_loop": int(self.a["game_loop"][i]),
+                             "marines": int(self.a["marines"][i])} for i in range(self.num_envs)]
+        return self._obs()
+
+    def step_async(self, actions: np.ndarray) -> None:
+        acts = np.asarray(actions).reshape(self.num_envs, -1)
+        self.a["actions"][...] = acts
+        if self._local is None:
+            self._send("step")
+
+    def step_wait(self) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, list[dict]]:
+        if self._local is not None:
+            self._local.step()
+        else:
+            self._collect()
+        a = self.a
+        game = a["game_reward"].copy()
+        done = a["done"].copy()
+        extra = np.zeros(self.num_envs)
+        extra_info: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
+        if self.shaping is not None:
+            extra, extra_info = self.shaping(self.frame_arrays, a["n_frames"], done)
+        infos: list[dict[str, Any]] = []
+        for i in range(self.num_envs):
+            info = {"game_reward": float(game[i]), "shaping": float(extra[i]),
+                    "env_steps": int(a["env_steps"][i]), "invalid": bool(a["invalid"][i]),
+                    "game_loop": int(a["game_loop"][i]), "marines": int(a["marines"][i]),
+                    **extra_info[i]}
+            if done[i]:
+                info["terminal_observation"] = {k: a[f"final/{k}"][i].copy()
+                                                for k in self.obs_keys}
+            infos.append(info)
+        return self._obs(), (game + extra).astype(np.float32), done, infos
+
+    def _obs(self) -> dict[str, np.ndarray]:
+        # Copies: SB3 keeps the last observation while the next step overwrites the arrays.
+        return {k: self.a[f"obs/{k}"].copy() for k in self.obs_keys}
+
+    def action_masks(self) -> np.ndarray:
+        """``(n, mask length)``: every game's mask (sb3-contrib's protocol, batched)."""
+        return self.a["masks"].copy()
+
+    def close(self) -> None:
+        if getattr(self, "_closed", False):
+            return
+        self._closed = True
+        for conn in self._conns:
+            try:
+                conn.send(("close", None))
+            except (BrokenPipeError, OSError):
+                pass
+        for p in self._procs:
+            p.join(timeout=5)
+            if p.is_alive():
+                p.kill()
+                p.join()
+        for conn in self._conns:
+            conn.close()
+        if self._local is not None:
+            self._local.close()
+
+    def env_method(self, method_name: str, *method_args: Any, indices: Any = None,
+                   **method_kwargs: Any) -> list[Any]:
+        if method_name == "action_masks":
+            masks = self.a["masks"]
+            return [masks[i].copy() for i in self._get_indices(indices)]
+        raise AttributeError(f"BuildMarinesVecEnv games have no method {method_name!r} "
+                             f"reachable from the learner")
+
+    def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
+        n = len(list(self._get_indices(indices)))
+        if attr_name == "render_mode":
+            return [None] * n
+        if attr_name == "action_masks":
+            return [self.action_masks] * n
+        raise AttributeError(f"BuildMarinesVecEnv games have no attribute {attr_name!r} "
+                             f"reachable from the learner")
+
+    def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
+        raise AttributeError(f"BuildMarinesVecEnv cannot set {attr_name!r} on its games")
+
+    def env_is_wrapped(self, wrapper_class: type, indices: Any = None) -> list[bool]:
+        return [False] * len(list(self._get_indices(indices)))
+
+    def __del__(self) -> None:
+        try:
+            self.close()
+        except Exception:  # noqa: BLE001 - interpreter shutdown
+            pass
+
+
+class BuildMarinesVectorEnv(gym_vector.VectorEnv):  # type: ignore[misc]
+    """The same games behind gymnasium's vector API (``gymnasium.vector.VectorEnv``).
+
+    ``reset(seed=s)`` seeds game i with ``s + i``; ``step`` returns batched observations,
+    rewards, ``terminated`` (the game's timer) and ``truncated`` (always False), and ``infos`` as
+    gymnasium batches them (each key an array, ``_key`` saying which games carry it). A game that
+    ends is reset in the same step (``AutoresetMode.SAME_STEP``): its last observation is
+    ``infos["final_obs"][i]``. ``action_masks()`` gives every game's mask.
+    """
+
+    metadata = {"autoreset_mode": gym_vector.AutoresetMode.SAME_STEP}
+
+    def __init__(self, cfg: GameConfig, n: int, *, processes: int | None = None,
+                 shaping: Any = None) -> None:
+        self.vec = BuildMarinesVecEnv(cfg, n, processes=processes, shaping=shaping)
+        self.num_envs = n
+        probe = self.vec.observation_space
+        self.single_observation_space = probe
+        self.single_action_space = self.vec.action_space
+        self.observation_space = gym_vector.utils.batch_space(probe, n)
+        self.action_space = gym_vector.utils.batch_space(self.vec.action_space, n)
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
+              ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        if seed is not None:
+            self.vec.seed(seed)
+        obs = self.vec.reset()
+        return obs, _batch_infos(self.vec.reset_infos)
+
+    def step(self, actions: Any) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray,
+                                          np.ndarray, dict[str, Any]]:
+        obs, rewards, dones, infos = self.vec.step(np.asarray(actions))
+        final = [i.pop("terminal_observation", None) for i in infos]
+        batched = _batch_infos(infos)
+        if any(f is not None for f in final):
+            batched["final_obs"] = np.array(final, dtype=object)
+            batched["_final_obs"] = np.array([f is not None for f in final])
+        return obs, rewards, dones, np.zeros_like(dones), batched
+
+    def action_masks(self) -> np.ndarray:
+        return self.vec.action_masks()
+
+    def close_extras(self, **kwargs: Any) -> None:
+        self.vec.close()
+
+
+def _batch_infos(infos: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """Per-game info dicts as gymnasium's vector infos: one array per key, ``_key`` masks."""
+    out: dict[str, Any] = {}
+    for key in sorted({k for i in infos for k in i}):
+        present = np.array([key in i for i in infos])
+        values = [i.get(key, 0) for i in infos]
+        out[key] = np.array(values)
+        out[f"_{key}"] = present
+    return out

@@ -226,7 +226,7 @@ def test_verify_beside_a_running_train_reports_the_write_not_damage(
     code, out, err = run_cli(["verify", str(run)], capsys)
     assert code == 0 and "OK (training run)" in out, err
     code, out, err = run_cli(["info", str(run)], capsys)
-    assert code == 0 and "4 of 4 epochs" in out and "writing" not in out.split()[0], out
+    assert code == 0 and "4 of 4 epochs" in out and not out.startswith("writing"), out
 
 
 def test_verify_and_info_of_a_dataset_being_written(

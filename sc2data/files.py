@@ -232,8 +232,9 @@ def _open_lock(path: Path) -> int:
 
 def writer(folder: Path, name: str = LOCK) -> str | None:
     """The command writing ``folder`` now, as its lock records it (``sc2data train (pid 12)``),
-    or None when no process holds the lock. Reads only: it never creates the lock file, and a
-    lock path that is not a regular file counts as no lock."""
+    or None when no other process holds the lock (this one's own lock is no other writer). Reads
+    only: it never creates the lock file, and a lock path that is not a regular file counts as
+    no lock."""
     try:
         fd = os.open(folder / name, os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC | os.O_NONBLOCK)
     except OSError:
@@ -244,7 +245,8 @@ def writer(folder: Path, name: str = LOCK) -> str | None:
         try:  # flock ignores the open mode: a held lock, shared or not, refuses this one
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            return _record(fd) or "an sc2data command"
+            record = _record(fd) or "an sc2data command"
+            return None if record.endswith(f"(pid {os.getpid()})") else record
         fcntl.flock(fd, fcntl.LOCK_UN)
         return None
     finally:

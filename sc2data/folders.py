@@ -10,6 +10,10 @@ apart by their files, described (``sc2data info``) and checked (``sc2data verify
   recorded fingerprint, each split's schema and rows, and every packed chunk through its checksum;
 * a training run (``state.json``): every run file against its recorded sha256, and the checkpoint
   loads (an unfinished run is reported as such, not as a fault).
+
+A folder that a live command is writing (it holds the folder's lock) is not checked: its files
+change under the check, and a half-committed epoch is no damage. ``verify`` says which command
+is writing it, in one line, and ``info`` marks what it shows as a moment of a write in progress.
 """
 
 from __future__ import annotations
@@ -19,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from sc2data.errors import Sc2DataError
+from sc2data.files import writer
 from sc2data.formats import Shape, check_record, loads
 
 
@@ -39,23 +44,46 @@ def kind(folder: Path) -> str:
 
 
 def verify_folder(folder: Path) -> tuple[str, list[str], list[str]]:
-    """(what the folder is, faults, notes)."""
+    """(what the folder is, faults, notes); a one-line error for a folder being written now
+    (before the check, or when one that found faults ends)."""
+    _not_being_written(folder)
     what = kind(folder)
     if what == "dataset":
-        return (what, *_dataset(folder))
-    if what == "pair set":
-        return what, _pairset(folder), []
-    return (what, *_run(folder))
+        faults, notes = _dataset(folder)
+    elif what == "pair set":
+        faults, notes = _pairset(folder), []
+    else:
+        faults, notes = _run(folder)
+    if faults:  # a write that began during the check changed files under it
+        _not_being_written(folder)
+    return what, faults, notes
+
+
+def writing(folder: Path) -> str | None:
+    """The command writing ``folder`` now (``sc2data train (pid 12)``), or None: the holder of its
+    lock, or of the one beside it (a pair set is written whole and renamed into place)."""
+    return writer(folder) or writer(folder.parent, f".{folder.name}.lock")
+
+
+def _not_being_written(folder: Path) -> None:
+    holder = writing(folder)
+    if holder is not None:
+        raise Sc2DataError(f"{folder} is being written by {holder} now: a write in "
+                           f"progress, its files not final yet; verify it when that command has "
+                           f"finished")
 
 
 def info(folder: Path) -> list[str]:
     """A plain-text description of the folder, whatever it is."""
+    holder = writing(folder)
     what = kind(folder)
+    note = [f"writing   {holder} is writing this folder now: what follows may change", ""] \
+        if holder else []
     if what == "dataset":
-        return _dataset_info(folder)
+        return note + _dataset_info(folder)
     if what == "pair set":
-        return _pairset_info(folder)
-    return _run_info(folder)
+        return note + _pairset_info(folder)
+    return note + _run_info(folder)
 
 
 def _dataset_info(folder: Path) -> list[str]:

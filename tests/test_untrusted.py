@@ -189,3 +189,63 @@ def test_rules_see_the_batch_as_read(dataset: Path) -> None:
     for r in (looks, swaps, looks):
         call(r, "test", batch)
     assert all(np.array_equal(s, stored) for s in seen) and len(seen) == 2
+
+
+# -- verify beside a command writing the folder ---------------------------------------------------
+
+def test_verify_beside_a_running_train_reports_the_write_not_damage(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``verify`` polled all through a real ``sc2data train`` (epochs committing under it) never
+    reports a fault: while the train holds the folder, one line naming it; after, OK."""
+    pairs = tiny_pairset(tmp_path / "pairs")
+    run = tmp_path / "run"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sc2data.cli", "train", str(pairs), "--out", str(run),
+         "--epochs", "4", "--threads", "1", "--vocab-size", "2000", "--no-progress"],
+        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    from sc2data.files import writer
+
+    seen: set[str] = set()
+    try:
+        deadline = time.monotonic() + 120
+        while writer(run) is None and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.01)
+        while proc.poll() is None:  # from before its first epoch to after its last
+            code, out, err = run_cli(["verify", str(run)], capsys)
+            if code == 0:  # between the lock's release and the process's end
+                seen.add("ok")
+                continue
+            assert "FAULT" not in err and "damaged" not in err, err
+            assert_one_line_error(code, err, f"{run} is being written by sc2data train "
+                                             f"(pid {proc.pid}) now", "verify it when")
+            seen.add("writing")
+    finally:
+        proc.wait(timeout=300)
+    assert proc.returncode == 0, proc.stderr.read() if proc.stderr else ""
+    assert "writing" in seen
+    code, out, err = run_cli(["verify", str(run)], capsys)
+    assert code == 0 and "OK (training run)" in out, err
+    code, out, err = run_cli(["info", str(run)], capsys)
+    assert code == 0 and "4 of 4 epochs" in out and not out.startswith("writing"), out
+
+
+def test_verify_and_info_of_a_dataset_being_written(
+        data: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A dataset whose lock another process holds (as a rollout or label does)."""
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import sys, time; from pathlib import Path; "
+         "from sc2data.files import FolderLock; lock = FolderLock(Path(sys.argv[1]), 'label'); "
+         "print('held', flush=True); time.sleep(60)", str(data)],
+        cwd=ROOT, stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout is not None and holder.stdout.readline() == "held\n"
+        code, _, err = run_cli(["verify", str(data)], capsys)
+        assert_one_line_error(code, err, f"is being written by sc2data label (pid {holder.pid})")
+        code, out, err = run_cli(["info", str(data)], capsys)
+        assert code == 0, err
+        assert out.startswith(f"writing   sc2data label (pid {holder.pid}) is writing"), out
+    finally:
+        holder.kill()
+        holder.wait()
+    code, out, err = run_cli(["verify", str(data)], capsys)
+    assert code == 0, err

@@ -8,6 +8,12 @@ atomically, so its presence means the rollout finished.
 Reads go chunk by chunk: a batch of (episode, step) requests is sorted into the chunks it
 touches, each chunk of each storage block holding a wanted key is fetched and decoded once (or
 taken from an LRU cache of decoded chunks), and the stacks are gathered in numpy.
+
+A shard is checked when it is opened to be read: its size as the index records it, and its
+header (format, settings, schema) and episode table as the dataset's record and index say
+(:func:`shard_fault`), so a shard copied from another dataset is an error, not other stacks read
+as this dataset's. Every chunk read is checked by its checksum; ``sc2data verify`` and ``label``
+check every shard's sha256.
 """
 
 from __future__ import annotations
@@ -93,6 +99,27 @@ def read_index(folder: Path) -> pa.Table:
     if missing:
         raise Sc2DataError(f"{path} lacks columns {sorted(missing)}; rerun the rollout")
     return table
+
+
+IDENTITY = ("episode", "n_steps", "frame_start", "step_start", "env_seed", "agent_seed")
+"""The episode-table columns a shard and the index must agree on."""
+
+
+def shard_fault(shard: Shard, rows: dict[str, np.ndarray], manifest: dict[str, Any]
+                ) -> str | None:
+    """Why ``shard`` is not the one ``manifest`` and the index ``rows`` (its episodes, sorted)
+    describe — its format version, settings, schema or episode table — or None."""
+    version = manifest.get("format_version")
+    if shard.attrs.get("format_version") != version:
+        return f"shard format {shard.attrs.get('format_version')} in a dataset of format {version}"
+    if shard.attrs.get("settings") != shard_settings(manifest["settings"], version):
+        return f"its settings differ from {MANIFEST}'s"
+    if shard.attrs.get("schema") != manifest["schema"]:
+        return f"its schema differs from {MANIFEST}'s"
+    for col in IDENTITY:
+        if not np.array_equal(np.asarray(shard.episodes[col]), rows[col]):
+            return f"its episode table ({col}) differs from {INDEX}"
+    return None
 
 
 def manifest_schema(manifest: dict[str, Any], where: Path) -> Schema:
@@ -198,6 +225,9 @@ class Dataset:
         self._step_start = cols["step_start"][order]
         names = np.asarray(self.index.column("shard").to_pylist(), dtype=object)[order]
         self.shard_names: list[str] = sorted(set(names))
+        self._shard_rows = names
+        self._identity = {c: self.index.column(c).to_numpy()[order]
+                          for c in (*IDENTITY, "shard_bytes")}
         self._shard_of = np.searchsorted(np.asarray(self.shard_names, dtype=object), names)
         self._stack_offsets = np.concatenate([[0], np.cumsum(self.n_steps)])
         self._cache = _ChunkCache(cache_bytes)
@@ -267,12 +297,37 @@ class Dataset:
     def _shard(self, i: int) -> Shard:
         shard = self._open.get(i)
         if shard is None:
-            shard = Shard(self.folder / self.shard_names[i])
+            shard = self._checked(self.shard_names[i])
             self._open[i] = shard
             if len(self._open) > self._max_open:
                 self._open.popitem(last=False)[1].close()
         else:
             self._open.move_to_end(i)
+        return shard
+
+    def _checked(self, name: str) -> Shard:
+        """Open shard ``name``; a one-line error unless it is the shard the index lists."""
+        path = self.folder / name
+        mine = self._shard_rows == name  # the index's rows in episode order: sorted
+        rows = {c: v[mine] for c, v in self._identity.items()}
+        recorded = set(rows["shard_bytes"].tolist())
+        try:
+            size = path.stat().st_size
+        except OSError:
+            size = None
+        fault = None if size is None or recorded == {size} else \
+            f"{size:,} bytes, the index says {min(recorded):,}"
+        shard = None
+        if fault is None:
+            shard = Shard(path)
+            fault = shard_fault(shard, rows, self.manifest)
+        if fault is not None:
+            if shard is not None:
+                shard.close()
+            raise Sc2DataError(f"{path} is not this dataset's shard ({fault}): damaged, replaced "
+                               f"or copied from another dataset; run sc2data verify "
+                               f"{self.folder}, and roll the shard out again")
+        assert shard is not None
         return shard
 
     def _rows(self, episodes: np.ndarray, steps: np.ndarray) -> np.ndarray:

@@ -44,7 +44,7 @@ from sc2data.data.chunks import (
 )
 from sc2data.errors import Sc2DataError
 from sc2data.files import fsync_path
-from sc2data.formats import SHARD
+from sc2data.formats import SHARD, loads
 from sc2data.schema import Schema, SchemaError
 
 """2: frames stored in blocks of keys (1 had one dataset per key)."""
@@ -434,7 +434,7 @@ def _attr(v: Any) -> Any:
     if isinstance(v, bytes):
         v = v.decode()
     if isinstance(v, str):
-        return json.loads(v)
+        return loads(v)  # a foreign shard: too deep, non-finite → ValueError
     return v.item() if isinstance(v, np.generic) else v
 
 

@@ -11,6 +11,11 @@ Either command encoder works the same way from outside: a text is encoded once, 
 its embedding cached; a ``minilm`` model's checkpoint already holds the frozen sentence
 embeddings of every text of its pair set, so only a never-seen text needs the sentence encoder's
 package (extra ``text``).
+
+What comes in is checked as the CLI checks it: a checkpoint by content when it loads (see
+:func:`load_model`), and the stacks on every call — every key the model reads, with the shape and
+an integer dtype per layer, ids within each layer's range, and finite vectors — so that a bad input
+is a :class:`~sc2data.errors.Sc2DataError` naming it, never a NaN or silently wrong distance.
 """
 
 from __future__ import annotations
@@ -70,17 +75,7 @@ class MEMScorer:
 
         from sc2data.model.mem import model_inputs
 
-        arrays = stacks.arrays if isinstance(stacks, StackBatch) else stacks
-        missing = [k for k in self._keys if k not in arrays]
-        if missing:
-            raise Sc2DataError(f"the stacks lack {missing[0]!r}, which the model was trained on "
-                               f"(it reads {len(self._keys)} keys, schema v{self.schema.version})")
-        for l in self.schema.layers:
-            size = self.schema.size(l.group)
-            shape = np.shape(arrays[l.key])[1:] if l.key in self._keys else (2, size, size)
-            if shape != (2, size, size):
-                raise Sc2DataError(f"{l.key} has shape {shape} per stack; the model expects "
-                                   f"(2, {size}, {size})")
+        arrays = self._checked(stacks.arrays if isinstance(stacks, StackBatch) else stacks)
         n = len(arrays[self._keys[0]])
         out = []
         with torch.inference_mode():
@@ -92,6 +87,55 @@ class MEMScorer:
                     e = self.model.state(model_inputs(self.model, part, self.device))
                 out.append(e.float().cpu().numpy())
         return np.concatenate(out) if out else np.zeros((0, self.model.cfg.dim), np.float32)
+
+    def _checked(self, arrays: Mapping[str, Any]) -> dict[str, np.ndarray]:
+        """The arrays the model reads, as numpy (a layer's ids in its stored dtype); a one-line
+        error naming the first key that is missing, of another shape or batch size, not integer
+        ids (a layer) or numbers (a vector), an id outside its layer's range, or a vector holding
+        NaN or infinity."""
+        missing = [k for k in self._keys if k not in arrays]
+        if missing:
+            raise Sc2DataError(f"the stacks lack {missing[0]!r}, which the model was trained on "
+                               f"(it reads {len(self._keys)} keys, schema v{self.schema.version})")
+        out = {k: np.asarray(arrays[k]) for k in self._keys}
+        sizes = {k: len(a) if a.ndim else 0 for k, a in out.items()}
+        first = self._keys[0]
+        odd = next((k for k in sizes if sizes[k] != sizes[first]), None)
+        if odd is not None:
+            raise Sc2DataError(f"the stacks' keys disagree on the batch size ({first}: "
+                               f"{sizes[first]}, {odd}: {sizes[odd]})")
+        for l in self.schema.layers:
+            if l.key not in out:
+                continue
+            a, size = out[l.key], self.schema.size(l.group)
+            if a.shape[1:] != (2, size, size) or a.ndim != 4:
+                raise Sc2DataError(f"{l.key} has shape {a.shape[1:]} per stack; the model expects "
+                                   f"(2, {size}, {size})")
+            if a.dtype.kind not in "ui":
+                raise Sc2DataError(f"{l.key} holds {a.dtype} values; the model reads integer ids "
+                                   f"({l.dtype}, as sc2data.Stacker and open_dataset give them)")
+            top = l.scale if l.categorical else l.limit  # a categorical id indexes a table
+            if a.size and (a.dtype != l.dtype or top < l.limit):  # its own dtype: in range
+                lo, hi = 0 if a.dtype.kind == "u" else int(a.min()), int(a.max())
+                if lo < 0 or hi >= top:
+                    raise Sc2DataError(f"{l.key} holds {lo if lo < 0 else hi}, outside the "
+                                       f"layer's range [0, {top}); pass the layer as observed")
+                out[l.key] = a.astype(l.dtype, copy=False)  # in range: lossless
+        for v in self.schema.vectors:
+            if v.name not in out:
+                continue
+            a = out[v.name]
+            if a.shape[1:] != (2, v.size) or a.ndim != 3:
+                raise Sc2DataError(f"{v.name} has shape {a.shape[1:]} per stack; the model "
+                                   f"expects (2, {v.size})")
+            if a.dtype.kind not in "uif":
+                raise Sc2DataError(f"{v.name} holds {a.dtype} values; the model reads numbers "
+                                   f"({v.dtype}, as sc2data.Stacker gives them)")
+            if a.dtype.kind == "f" and not np.isfinite(a).all():
+                bad = np.argwhere(~np.isfinite(a))[0]
+                raise Sc2DataError(f"{v.name} holds {a[tuple(bad)]} (stack {bad[0]}, field "
+                                   f"{v.fields[bad[2]]!r}); the model reads finite numbers")
+        return out
 
     def embed_texts(self, texts: Sequence[str]) -> np.ndarray:
         """``(T, dim)`` float32 command embeddings; each distinct text is encoded once, ever."""
@@ -140,8 +184,12 @@ def load_model(run: str | os.PathLike[str], device: str = "cpu", fast: bool = Tr
     """Load ``RUN/best.pt`` (or a checkpoint file) as a :class:`MEMScorer` on ``device``
     (``fast=False``: states through the training path's packing on a CPU too).
 
-    A run folder is checked first: finished (unless ``allow_unfinished``) and its checkpoint the
-    bytes training wrote (``state.json``)."""
+    Checked first, by content: a run folder, or a checkpoint file in one (beside a
+    ``state.json`` that records it), is a finished run (unless ``allow_unfinished``) whose
+    checkpoint is the bytes training wrote (sha256 in ``state.json``). A checkpoint file outside
+    a run has no recorded sha256: every record of its archive must pass its CRC-32 (one flipped
+    bit fails it). Either way the file must load as an sc2data model checkpoint of this schema
+    version, and every weight must be finite."""
     try:
         import torch  # noqa: F401
     except ImportError:
@@ -156,10 +204,49 @@ def load_model(run: str | os.PathLike[str], device: str = "cpu", fast: bool = Tr
 
         check_run(path, allow_unfinished=allow_unfinished)
         path = path / "best.pt"
+    else:
+        _check_file(path, allow_unfinished)
     dev = resolve_device(device)
     model, meta = load_checkpoint(path, dev)
+    _check_finite(model, path)
     if "config" not in meta and (path.parent / "config.json").is_file():
         from sc2data.model.train import read_config
 
         meta["config"] = read_config(path.parent)
     return MEMScorer(model, meta, dev, fast)
+
+
+def _check_file(path: Path, allow_unfinished: bool) -> None:
+    """A checkpoint file by content: against its run's ``state.json`` where one records it (or
+    should: ``best.pt``, ``last.pt``), else every record of its archive through its CRC-32."""
+    import zipfile
+
+    from sc2data.model.train import CHECKPOINTS, STATE_FILE, check_run, read_state
+
+    state = read_state(path.parent) if (path.parent / STATE_FILE).is_file() else None
+    if state is not None and (path.name in state["sha256"] or path.name in CHECKPOINTS):
+        check_run(path.parent, allow_unfinished=allow_unfinished, files=(path.name,))
+        return
+    if not zipfile.is_zipfile(path):
+        return  # not torch's archive: load_checkpoint says so
+    try:
+        with zipfile.ZipFile(path) as archive:
+            bad = archive.testzip()
+    except (OSError, zipfile.BadZipFile, EOFError) as e:
+        raise Sc2DataError(f"{path} is not a readable checkpoint ({type(e).__name__}: {e}); "
+                           f"use an intact copy, or train again") from None
+    if bad is not None:
+        raise Sc2DataError(f"{path} is damaged: its record {bad} fails its CRC-32 check; use an "
+                           f"intact copy, or train again")
+
+
+def _check_finite(model: Any, path: Path) -> None:
+    """One-line error unless every weight of ``model`` is finite."""
+    import torch
+
+    bad = [k for k, v in model.state_dict().items()
+           if v.is_floating_point() and not bool(torch.isfinite(v).all())]
+    if bad:
+        more = f" and {len(bad) - 1} more" if len(bad) > 1 else ""
+        raise Sc2DataError(f"{path} holds non-finite weights ({bad[0]}{more}): damaged, or its "
+                           f"training diverged; use an intact copy, or train again")

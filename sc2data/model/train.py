@@ -46,6 +46,7 @@ from sc2data.files import (
     publish,
     sha256_file,
     write_atomic,
+    writer,
     writing,
 )
 from sc2data.formats import Shape, check_record, loads
@@ -484,6 +485,11 @@ def check_run(run: Path, *, allow_unfinished: bool = False,
     for name in files:
         digest = state["sha256"].get(name)
         if not (run / name).is_file() or digest is None or _digest(run, name, state) != digest:
+            holder = writer(run)
+            if holder is not None:  # an epoch being committed under us: not damage
+                raise Sc2DataError(f"{run} is being written by {holder} now: a write in "
+                                   f"progress, its files not final yet; read it when that "
+                                   f"command has finished")
             raise Sc2DataError(f"{run / name} is missing, damaged or was replaced (its sha256 "
                                f"differs from {STATE_FILE}); train the run again")
     return state

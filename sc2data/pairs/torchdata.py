@@ -18,6 +18,12 @@ null) and ``pair`` (row within the split). The packed split is opened lazily, on
 so the object pickles into ``DataLoader`` workers and each opens its own file. Packed files are
 compressed in blocks of 256 stacks: :func:`block_order` gives a shuffled order that reads each
 block once per epoch, where ``shuffle=True`` decodes a block for every pair.
+
+The pair set is checked by content when the object is made (its fingerprint, and the packed
+split against its pairs), and again before an item is read whenever ``pairs.parquet`` or the
+split's packed file changed since (another inode, size or modification time): the same bytes
+read on, other bytes (a folder rebuilt or replaced) are a one-line error, never new states
+paired with the commands read before.
 """
 
 from __future__ import annotations
@@ -30,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from sc2data.errors import MissingDependencyError, Sc2DataError
-from sc2data.pairs.layout import packed_path
+from sc2data.pairs.layout import PAIRS_FILE, fingerprint, packed_path
 from sc2data.pairs.loader import SPLITS, PairSet
 from sc2data.pairs.packed import BLOCK
 
@@ -51,8 +57,9 @@ class PairDataset(Dataset):
                  keys: Sequence[str] | None = None) -> None:
         if split not in SPLITS:
             raise Sc2DataError(f"unknown split {split!r}; choose one of: {', '.join(SPLITS)}")
-        pairset = PairSet(path)
         self.path, self.split = Path(path), split
+        before = self._stat()
+        pairset = PairSet(path)
         self.schema = pairset.schema
         self.keys: tuple[str, ...] = tuple(keys) if keys is not None else self.schema.keys()
         unknown = [k for k in self.keys if k not in self.schema.keys()]
@@ -62,8 +69,14 @@ class PairDataset(Dataset):
         self.commands: list[str] = [str(c["id"]) for c in pairset.commands]
         """Command ids in pair-set order: ``command_index`` indexes this list."""
         pairs = pairset.pairs(split)
-        with pairset.packed(split):  # checks the packed file against the pair set once, here
+        with pairset.packed(split):  # the packed file against the pair set's schema and rows
             pass
+        self.fingerprint = pairset.fingerprint
+        """The pair set's content as checked here: what every later read must still be."""
+        self._signature = self._stat()
+        if self._signature != before:
+            raise Sc2DataError(f"{self.path} changed while it was being opened; open it again "
+                               f"when whatever writes it has finished")
         self.state, self.command = pairs.state, pairs.command
         self.command_id, self.target, self.kind = pairs.command_id, pairs.target, pairs.kind
         index = {c: i for i, c in enumerate(self.commands)}
@@ -81,7 +94,38 @@ class PairDataset(Dataset):
     def __getstate__(self) -> dict[str, Any]:
         return {**self.__dict__, "_file": None, "_pid": None}  # h5py handles do not pickle
 
+    def _stat(self) -> tuple[tuple[int, int, int, int], ...] | None:
+        """What tells a changed file: (device, inode, size, mtime) of ``pairs.parquet`` and the
+        split's packed file; None if one is gone."""
+        try:
+            return tuple((st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns) for st in (
+                os.stat(self.path / PAIRS_FILE), os.stat(packed_path(self.path, self.split))))
+        except OSError:
+            return None
+
+    def _recheck(self) -> None:
+        """The files changed since they were checked: the same bytes read on (reopened), other
+        bytes are an error."""
+        now = self._stat()
+        try:
+            same = now is not None and fingerprint(self.path) == self.fingerprint
+        except OSError:
+            same = False
+        if not same:
+            raise Sc2DataError(f"{self.path}: pairs.parquet or packed/{self.split}.h5 changed or "
+                               f"is gone since this PairDataset checked it (its sha256 differs); "
+                               f"make a new PairDataset to read the pair set as it is now")
+        self._signature = now
+        self._close()
+
+    def _close(self) -> None:
+        if self._file is not None and self._pid == os.getpid():
+            self._file.close()
+        self._file, self._pid = None, None
+
     def _open(self) -> Any:
+        if self._stat() != self._signature:
+            self._recheck()
         if self._pid != os.getpid():  # first use in this process (a DataLoader worker)
             import h5py
             import hdf5plugin  # noqa: F401  (registers the packed files' LZ4 filter)
@@ -89,13 +133,22 @@ class PairDataset(Dataset):
             self._file = h5py.File(packed_path(self.path, self.split), "r",
                                    rdcc_nbytes=_CHUNK_CACHE, rdcc_nslots=101)
             self._pid = os.getpid()
+            if self._stat() != self._signature:  # replaced between the check and the open
+                self._recheck()
+                return self._open()
         return self._file
 
     def __getitem__(self, i: int) -> dict[str, Any]:
         f = self._open()
         row = int(self.state[i])
+        try:
+            state = {k: f[k][row] for k in self.keys}
+        except OSError as e:  # a chunk that fails its checksum
+            raise Sc2DataError(f"{packed_path(self.path, self.split)} is unreadable at stack "
+                               f"{row} ({(str(e).strip().splitlines() or [''])[0]}); rerun "
+                               f"sc2data pair") from None
         return {
-            "state": {k: f[k][row] for k in self.keys},
+            "state": state,
             "command": str(self.command[i]),
             "command_id": str(self.command_id[i]),
             "command_index": int(self.command_index[i]),

@@ -58,3 +58,41 @@ def test_batches_index_too_and_reprs_show_shapes(ds: sc2data.Dataset) -> None:
     assert "[" not in repr(batch).split("\n")[0] and "array" not in repr(batch)
     text = repr(ds)
     assert "stacks=21" in text and "(2, 64, 64)" in text and "array" not in text
+
+
+def test_a_shard_from_another_dataset_is_refused_when_read(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """As ``label`` and ``verify`` refuse it: by its size as the index records it, and (a foreign
+    shard whose size the index was made to record) by its header and episode table."""
+    import shutil
+
+    import pyarrow.parquet as pq
+
+    from sc2data.data.dataset import INDEX, write_index
+    from sc2data.errors import Sc2DataError
+
+    def make(out, seed):  # type: ignore[no-untyped-def]
+        rollout(RolloutConfig(episodes=2, max_steps=7, episodes_per_shard=1, seed=seed), out,
+                env_factory=synthetic_env_factory(20), progress=False)
+        return out
+
+    ours, theirs = make(tmp_path / "ours", 1), make(tmp_path / "theirs", 2)
+    before = loops(sc2data.open_dataset(ours)[7:14])  # episode 1: shard-00001
+    shutil.copyfile(theirs / "shard-00001.h5", ours / "shard-00001.h5")
+    ds = sc2data.open_dataset(ours)
+    assert len(ds[0:7]) == 7  # its own shards read on
+    with pytest.raises(Sc2DataError, match=r"shard-00001.h5 is not this dataset's shard "
+                                                   r"\(.* bytes, the index says .*\): damaged, "
+                                                   r"replaced or copied from another dataset"):
+        ds[7:14]
+    rows = pq.read_table(ours / INDEX).to_pylist()
+    size = (ours / "shard-00001.h5").stat().st_size
+    write_index(ours, [{**r, "shard_bytes": size} if r["shard"] == "shard-00001.h5" else r
+                       for r in rows])
+    with pytest.raises(Sc2DataError, match=r"shard-00001.h5 is not this dataset's shard "
+                                                   r"\(its settings differ"):
+        sc2data.open_dataset(ours)[7:14]
+    write_index(ours, rows)  # the control: the same shard, rolled out again, reads as before
+    shutil.rmtree(theirs)
+    make(theirs, 1)
+    shutil.copyfile(theirs / "shard-00001.h5", ours / "shard-00001.h5")
+    assert loops(sc2data.open_dataset(ours)[7:14]) == before

@@ -194,3 +194,87 @@ def test_checkpoint_of_another_schema_version_is_refused(tmp_path: Path) -> None
     (tmp_path / "best.pt").write_bytes(b"not a checkpoint")
     with pytest.raises(Sc2DataError, match="not a readable checkpoint"):
         load_model(tmp_path / "best.pt")
+
+
+# -- the Python API checks what the CLI checks -----------------------------------------------------
+
+def _flip_a_weight_bit(path: Path) -> None:
+    """Flip one bit inside the largest tensor record of a torch checkpoint (zip) archive."""
+    import zipfile
+
+    with zipfile.ZipFile(path) as z:
+        rec = max(z.infolist(), key=lambda i: i.file_size)
+    data = bytearray(path.read_bytes())
+    name_len, extra_len = (int.from_bytes(data[rec.header_offset + o:rec.header_offset + o + 2],
+                                          "little") for o in (26, 28))
+    at = rec.header_offset + 30 + name_len + extra_len + rec.file_size // 2
+    data[at] ^= 0x40
+    path.write_bytes(bytes(data))
+
+
+def test_a_checkpoint_file_is_checked_by_content(tmp_path: Path) -> None:
+    """``load_model(FILE)``: in a run, against its state.json; outside one, each record's CRC;
+    anywhere, finite weights. Each flip below loaded before, giving wrong distances."""
+    from tests.mem_helpers import tiny_pairset, train_tiny
+
+    run = train_tiny(tiny_pairset(tmp_path / "pairs"), tmp_path / "run", epochs=1)
+    loose = tmp_path / "loose.pt"
+    loose.write_bytes((run / "best.pt").read_bytes())
+    assert load_model(run / "best.pt") is not None and load_model(loose) is not None  # controls
+    _flip_a_weight_bit(run / "best.pt")
+    with pytest.raises(Sc2DataError, match=r"best.pt is missing, damaged or was replaced \(its "
+                                           r"sha256 differs from state.json\)"):
+        load_model(run / "best.pt")
+    _flip_a_weight_bit(loose)
+    with pytest.raises(Sc2DataError, match=r"loose.pt is damaged: its record .* fails its "
+                                           r"CRC-32 check"):
+        load_model(loose)
+    m, _ = _model(SMALL_SCHEMA)
+    with torch.no_grad():
+        next(p for n, p in m.named_parameters() if n.startswith("state.")).view(-1)[3] = \
+            float("inf")
+    save_checkpoint(tmp_path / "diverged.pt", m, WORDS, {})  # whole, with valid CRCs
+    with pytest.raises(Sc2DataError, match=r"diverged.pt holds non-finite weights \(state\."):
+        load_model(tmp_path / "diverged.pt")
+
+
+def test_the_scorer_refuses_inputs_it_cannot_score(tmp_path: Path) -> None:
+    """NaN or infinite vectors, ids out of a layer's range, wrong dtypes or batch sizes: one
+    Sc2DataError naming the key, never a NaN or silently wrong distance."""
+    m, batch = _model(SMALL_SCHEMA)
+    save_checkpoint(tmp_path / "best.pt", m, WORDS, {})
+    s = load_model(tmp_path / "best.pt")
+    good = dict(batch.arrays)
+    before = s.distance(good, "build a depot")
+    assert np.isfinite(before).all()
+    # the same ids in a wider integer dtype, and the vectors as floats, read the same
+    wide = {k: v.astype(np.int64) if k.startswith(("screen/", "minimap/")) else
+            v.astype(np.float64) for k, v in good.items()}
+    np.testing.assert_allclose(s.distance(wide, "build a depot"), before, rtol=1e-6)
+
+    def bad(key: str, value: np.ndarray) -> dict[str, np.ndarray]:
+        return {**good, key: value}
+
+    nan = good["player"].astype(np.float32)
+    nan[2, 1, 3] = np.nan
+    inf = good["player"].astype(np.float64)
+    inf[0, 0, 0] = np.inf
+    high = good["screen/player_relative"].copy()
+    high[1, 0, 5, 5] = 7  # uint8 holds it; player_relative has 5 ids
+    negative = good["screen/unit_type"].astype(np.int32)
+    negative[0, 1, 0, 0] = -1
+    cases = {
+        "nan": (bad("player", nan), r"player holds nan \(stack 2, field 'food_used'\)"),
+        "inf": (bad("player", inf), r"player holds inf \(stack 0, field 'player_id'\)"),
+        "id-high": (bad("screen/player_relative", high),
+                    r"screen/player_relative holds 7, outside the layer's range \[0, 5\)"),
+        "id-negative": (bad("screen/unit_type", negative),
+                        r"screen/unit_type holds -1, outside the layer's range"),
+        "float-layer": (bad("screen/unit_type", good["screen/unit_type"].astype(np.float32)),
+                        r"screen/unit_type holds float32 values; the model reads integer ids"),
+        "text-vector": (bad("player", good["player"].astype(str)), r"player holds <U\d+ values"),
+        "batch": (bad("player", good["player"][:2]), r"disagree on the batch size"),
+    }
+    for name, (arrays, message) in cases.items():
+        with pytest.raises(Sc2DataError, match=message):
+            s.distance(arrays, "build a depot")

@@ -36,3 +36,36 @@ def test_a_dataloader_with_two_workers_sees_every_pair_once(tmp_path: Path) -> N
     row = int(pairs.state[3])
     assert np.array_equal(ds[3]["state"]["player"], packed.read(row, row + 1).arrays["player"][0])
     assert "pairs=" in repr(ds)
+
+
+def test_a_pair_set_changed_after_opening_is_rechecked_before_a_read(tmp_path: Path) -> None:
+    """Replaced by another pair set (as a rebuild renames one into place): an error, not new
+    states paired with the commands read before; the same bytes again (touched, copied): read
+    on, the same items."""
+    import os
+    import pickle
+    import shutil
+
+    from sc2data.errors import Sc2DataError
+
+    path = tiny_pairset(tmp_path / "pairs")
+    other = tiny_pairset(tmp_path / "other", seed=1)
+    ds = PairDataset(path, "train")
+    first = ds[0]
+    copy = pickle.loads(pickle.dumps(ds))  # as a DataLoader worker gets it
+    os.utime(path / "packed" / "train.h5")  # touched, same bytes
+    shutil.copyfile(path / "pairs.parquet", tmp_path / "p")
+    os.replace(tmp_path / "p", path / "pairs.parquet")  # another inode, same bytes
+    again = ds[0]
+    assert all(np.array_equal(again["state"][k], first["state"][k]) for k in first["state"])
+    assert again["command"] == first["command"]
+    path.rename(tmp_path / "old")
+    other.rename(path)  # the folder replaced
+    for d in (ds, copy):
+        with pytest.raises(Sc2DataError, match=r"changed or is gone since this PairDataset "
+                                               r"checked it .*make a new PairDataset"):
+            d[0]
+    shutil.rmtree(path)
+    with pytest.raises(Sc2DataError, match="changed or is gone"):
+        ds[1]
+    assert PairDataset(tmp_path / "old", "train")[0]["command"] == first["command"]

@@ -181,8 +181,8 @@ class Building(GameCore):
             self._spawn_scv(b, t)
         else:
             self._spawn_marine(b, t)
-        if b.queue:
-            self._start_item(b, t)
+        if b.queue:  # the next unit has already had this loop (real replays: 271, 399)
+            self._start_item(b, t - md.QUEUE_HANDOFF_LOOPS)
         else:
             self.idle_producers.add(b)
 

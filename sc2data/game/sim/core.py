@@ -235,8 +235,10 @@ class GameCore(abc.ABC):
         return sorted((u for u in self.units.values() if u.utype == md.MARINE), key=_tag)
 
     def collection_rate(self) -> int:
-        """Minerals per (real, "faster") minute over the last 15 s, as the game's income shows."""
-        window = 336.0
+        """Minerals per real ("faster") minute over the last 240 loops (fewer at the start), as
+        the game's ``minerals_collection_rate`` counts them: real replays show it in steps of
+        5 minerals × 1344 / 240 (a delivery) and, before loop 240, scaled by 1344 / loop."""
+        window = float(min(md.COLLECTION_WINDOW, self.loop)) or 1.0
         horizon = self.loop - window
         dq = self._deliveries
         while dq and dq[0][0] <= horizon:
@@ -331,13 +333,7 @@ class GameCore(abc.ABC):
         o = u.order
         if o == GATHER:
             if u.phase == TO_PATCH:
-                p = u.patch
-                assert p is not None
-                if p.harvester is None:
-                    self._start_harvest(u, p, t)
-                else:
-                    u.phase = WAITING
-                    p.waiting.append(u)
+                self._reach_patch(u, t)
             else:
                 self._deliver(u, t)
                 self._to_patch(u, t)
@@ -417,7 +413,7 @@ class GameCore(abc.ABC):
         raise NotImplementedError
 
     @abc.abstractmethod
-    def _start_harvest(self, u: Unit, p: Unit, t: float) -> None:
+    def _reach_patch(self, u: Unit, t: float) -> None:
         raise NotImplementedError
 
     @abc.abstractmethod

@@ -147,25 +147,38 @@ MARINE_DAMAGE = 6
 MARINE_COOLDOWN = 0.8608 * LOOPS_PER_GAME_SECOND
 MARINE_RANGE = 5.0
 
-# Mining (LotV): 5 minerals a trip, a patch is busy ≈44.6 loops per harvest.
+# Mining (LotV). A trip: walk to the field, harvest 5 minerals (the field is taken meanwhile),
+# walk back to the CC and deliver. The numbers the game shows (TL.net's LotV production
+# spreadsheet; real replays, ``benchmarks/real_game.py``): the first two workers on a field each
+# bring 55–63 minerals per real minute (1,344 loops), 944 for 16 workers on 8 fields; a field
+# gives at most ≈143 a minute, so a third worker adds ≈25 (1,144 for 24 workers).
 HARVEST_LOOPS = 44.6
+"""Loops a worker spends harvesting, the field taken (LotV: 2.786 game seconds)."""
 CARRY = 5
-PATCH_CLEAR_LOOPS = 10.0
-"""Loops after a harvest before the next worker can start on the same field (the first
-turning away, the second stepping in). It caps a field at 5 / 54.6 minerals per loop, so a third
-worker on a field adds little, as in the game."""
-MINING_LEG_OVERHEAD = 29.0
-"""Loops added to each mining leg (patch→CC, CC→patch) beyond distance/speed.
+PATCH_CLEAR_LOOPS = 2.4
+"""Loops after a harvest before the next worker can start on the same field. With
+``HARVEST_LOOPS`` it caps a field at 5 × 1344 / 47 ≈ 143 minerals per real minute, the game's
+figure: a third worker on a field waits for it and adds ≈25, as in the game."""
+MINING_LEG_OVERHEAD = 22.0
+"""Loops added to each mining leg (field→CC, CC→field) beyond distance / SCV speed.
 
-The straight-line legs here are 1.5–3 world units (≈8–15 loops); a real SCV accelerates,
-decelerates, turns and paths around the footprints, which the game's traces show as a ≈125-loop
-round trip (≈0.04 minerals per loop per worker). This one number is calibrated so the income
-matches real-game traces of the same Terran start: first minerals ≈120 loops in (SCVs on the mineral side),
-≈0.52 minerals/loop with 12–14 SCVs, ≈0.63 at saturation (16); ``tests/sim/test_economy.py``
-holds it there.
+The straight-line legs here are 1.5–3 world units (≈8–17 loops at full speed); a real SCV
+accelerates, decelerates and turns at each end, and delivers on touching the CC. This one
+number is set so that a worker's round trip takes ≈114 loops on the average field: 59 minerals
+per real minute per worker with two to a field, 944 for 16 workers (the spreadsheet's 944), and
+713 for the 12 workers of the start (the real replays' median, 713). Fields nearer the CC give
+more, farther ones less, from the map's own positions. ``tests/game/sim/test_economy.py`` holds
+these figures.
 """
+COLLECTION_WINDOW = 240
+"""Loops over which the game's ``minerals_collection_rate`` counts deliveries."""
 WORKERS_PER_PATCH = 2
-"""Workers spread to another field when theirs already has this many (the game's bouncing)."""
+"""Workers spread to another field when theirs already has this many, as the game spreads
+them; a third comes only once every field has two, and then waits its turn at the field."""
+QUEUE_HANDOFF_LOOPS = 1
+"""A unit produced back to back from a queue appears ``build_loops − 1`` after the one before
+it (SCV every 271 loops, marine every 399), one from an idle building ``build_loops`` after the
+order (272, 400): real replays show both, on every sample."""
 
 # --- Static grids ------------------------------------------------------------------------------
 

@@ -1,9 +1,12 @@
 """Mining: workers gather from mineral fields and carry 5 minerals a trip to the CC.
 
-A field is mined by one worker at a time for ``HARVEST_LOOPS`` (≈44.6 loops in LotV), then
-needs ``PATCH_CLEAR_LOOPS`` before the next; others wait their turn. Workers sent to a field that
-already has two spread to the nearest field with fewer, as the game's workers bounce. Each leg
-between field and CC takes distance / SCV speed plus the calibrated ``MINING_LEG_OVERHEAD``.
+A trip as the game makes it: the walk to the field, ``HARVEST_LOOPS`` of harvesting with the
+field taken, the walk back to the CC, the delivery. One worker harvests a field at a time and
+the next starts ``PATCH_CLEAR_LOOPS`` after; others wait their turn. Fields fill two workers
+each — a worker sent to a field that already has two goes to the nearest with fewer, as the
+game spreads them — and only then three, the third waiting at the field. Each leg takes distance
+/ SCV speed plus ``MINING_LEG_OVERHEAD``. The result is held against real games by
+``benchmarks/real_game.py``: 713 minerals a real minute for 12 workers, 944 for 16, 1,144 for 24.
 """
 
 from __future__ import annotations
@@ -84,6 +87,16 @@ class Mining(GameCore):
         src = (u.patch.x1, u.patch.y1) if u.patch is not None else u.pos(t)
         x, y = self._edge_point(src, self.cc, u.data.radius)
         self._at(self._move(u, t, x, y, md.MINING_LEG_OVERHEAD), ARRIVE, u)
+
+    def _reach_patch(self, u: Unit, t: float) -> None:
+        """``u`` reaches its field: it mines at once if nobody does, else waits its turn."""
+        p = u.patch
+        assert p is not None
+        if p.harvester is None and not p.waiting:
+            self._start_harvest(u, p, t)
+        else:
+            u.phase = WAITING
+            p.waiting.append(u)
 
     def _next_harvester(self, p: Unit, t: float) -> None:
         while p.waiting and p.harvester is None:

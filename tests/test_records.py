@@ -213,11 +213,7 @@ def test_each_command_reads_the_good_record(good: dict[str, Path], tmp_path: Pat
         assert code == 0, err
 
 
-RL_PARSE = pytest.mark.xfail(strict=True, reason="sc2data/rl/train.py reads its records with "
-                             "json.loads, not sc2data.formats.loads (the rl rewrite takes it)")
-CASES = [pytest.param(kind, bad, command, id=f"{kind}-{bad}-{command}",
-                      marks=[RL_PARSE] if kind.startswith("rl-") and bad == "nested"
-                      else [])
+CASES = [pytest.param(kind, bad, command, id=f"{kind}-{bad}-{command}")
          for kind, (_, commands) in READERS.items() for bad in BAD for command in commands]
 
 

@@ -64,8 +64,8 @@ class PairSet:
             raise Sc2DataError(f"{self.path} has no pairset.json; is it a pair-set folder "
                                f"(sc2data pair output)?") from None
         except ValueError as e:  # invalid JSON, or no record (formats.loads)
-            raise Sc2DataError(f"{meta_path} is not a readable record ({e}); rebuild the pair set") \
-                from None
+            raise Sc2DataError(f"{meta_path} is not valid JSON or not a readable record ({e}); "
+                               f"rebuild the pair set") from None
         PAIRSET.check(self.meta, meta_path)
         try:
             self.schema = Schema.from_dict(self.meta["schema"])

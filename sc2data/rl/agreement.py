@@ -49,7 +49,7 @@ def agreement(run: Path, mem: Path, *, episodes: int = 3, deterministic: bool = 
     import torch
     from sb3_contrib import MaskablePPO
 
-    from sc2data.labels.registry import load_registry
+    from sc2data.labels.registry import call, load_registry
     from sc2data.model.reward import load_model
     from sc2data.rl.envs import BuildMarinesGym
     from sc2data.rl.rewards import stacks_of
@@ -64,8 +64,8 @@ def agreement(run: Path, mem: Path, *, episodes: int = 3, deterministic: bool = 
     ids = [str(c["id"]) for c in commands]
     texts = [str(c["text"]) for c in commands]
     registry = load_registry()
-    rules = [registry.get(i).rule for i in ids]  # an unknown id: one line naming the known ones
-    rule_schema = schema_for(k for r in rules for k in r.requires if "/" in k)
+    entries = [registry.get(i) for i in ids]  # an unknown id: one line naming the known ones
+    rule_schema = schema_for(k for e in entries for k in e.rule.requires if "/" in k)
     limit = scorer.threshold if threshold is None else float(threshold)
 
     model = MaskablePPO.load(run / "model.zip", device="cpu")
@@ -84,7 +84,8 @@ def agreement(run: Path, mem: Path, *, episodes: int = 3, deterministic: bool = 
                 if len(frames) < 2:
                     continue
                 rb = stacks_of(frames, rule_schema)
-                fired = np.stack([np.asarray(r(rb), bool) for r in rules], axis=1)  # (B, n)
+                fired = np.stack([np.asarray(call(e.rule, e.source, rb, "a policy's stacks"),
+                                             bool) for e in entries], axis=1)  # (B, n)
                 matched = scorer.distances(stacks_of(frames, scorer.schema), texts) < limit
                 tp += (fired & matched).sum(0)
                 fp += (~fired & matched).sum(0)

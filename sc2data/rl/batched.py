@@ -18,7 +18,7 @@ import numpy as np
 
 from sc2data.errors import Sc2DataError
 from sc2data.rl.narration import Narration, check_readable
-from sc2data.rulebase import Rule, schema_for
+from sc2data.rulebase import schema_for
 from sc2data.schema import Schema, StackBatch
 
 
@@ -46,8 +46,8 @@ class BatchedRules:
         from sc2data.labels.registry import load_registry
 
         self.bonus = float(bonus)
-        self.rules: list[Rule] = [e.rule for e in load_registry().select(rule_ids)]
-        self.schema = schema_for(k for r in self.rules for k in r.requires if "/" in k)
+        self.entries = list(load_registry().select(rule_ids))
+        self.schema = schema_for(k for e in self.entries for k in e.rule.requires if "/" in k)
 
     def reset(self, n: int) -> None:
         """A new vector of ``n`` games (nothing to remember between decisions)."""
@@ -55,9 +55,12 @@ class BatchedRules:
     def __call__(self, frames: Mapping[str, np.ndarray], n_frames: np.ndarray,
                  done: np.ndarray) -> tuple[np.ndarray, list[dict[str, Any]]]:
         batch, counts = decision_stacks(frames, n_frames, self.schema)
+        from sc2data.labels.registry import call
+
         fired = np.zeros(len(batch), dtype=np.int64)
-        for rule in self.rules:
-            fired += np.asarray(rule(batch), dtype=bool)
+        for e in self.entries:  # each on a read-only view, as labelling runs them
+            fired += np.asarray(call(e.rule, e.source, batch, "an RL decision's stacks"),
+                                dtype=bool)
         game = np.repeat(np.arange(len(counts)), counts)
         per_game = np.bincount(game, weights=fired, minlength=len(counts))
         return self.bonus * per_game, [{} for _ in counts]

@@ -29,7 +29,7 @@ def train_cmd(
     mem: Optional[Path] = typer.Option(None, "--mem", help="Trained MEM run (sc2data train "
                                                             "--out), for --reward narration."),
     steps: int = typer.Option(10_000, "--steps", help="Decisions to train for, over all envs."),
-    envs: int = typer.Option(1, "--envs", help="Games stepped together (one batched policy "
+    envs: int = typer.Option(16, "--envs", help="Games stepped together (one batched policy "
                                                "and reward call per step)."),
     processes: Optional[int] = typer.Option(
         None, "--processes", help="Worker processes stepping the games (0: in this process) "
@@ -44,16 +44,19 @@ def train_cmd(
                                                        "within this many decisions (0: never)."),
     episode_steps: Optional[int] = typer.Option(
         None, "--episode-steps", help="pysc2 steps per episode on the simulator [1800]."),
-    rollout: int = typer.Option(256, "--rollout", help="PPO rollout length per env."),
-    batch_size: int = typer.Option(64, "--batch-size", help="PPO minibatch size."),
+    rollout: int = typer.Option(64, "--rollout", help="PPO rollout length per env."),
+    batch_size: int = typer.Option(256, "--batch-size", help="PPO minibatch size."),
     checkpoint_every: int = typer.Option(2048, "--checkpoint-every",
                                          help="Decisions between checkpoints."),
     obs: str = typer.Option("compact", "--obs", help="What the policy sees: compact (one-hot "
                                                      "unit types, few layers) or stored (the "
                                                      "stored schema's layers)."),
-    obs_size: int = typer.Option(64, "--obs-size", help="compact: 64 or 32 pixels a side."),
+    obs_size: int = typer.Option(32, "--obs-size", help="compact: 64 or 32 pixels a side."),
     minimap: bool = typer.Option(False, "--minimap/--no-minimap",
                                  help="compact: add the minimap's channels."),
+    threads: Optional[int] = typer.Option(
+        None, "--threads", help="Torch threads of the learner (policy, MEM, updates) [one per "
+                                "core]."),
     device: str = typer.Option("auto", "--device", help="Policy and MEM on cpu, cuda or auto "
                                                         "(cuda where a GPU is present)."),
     progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",
@@ -69,7 +72,8 @@ def train_cmd(
                    bonus=bonus, threshold=threshold, patience=patience,
                    episode_steps=episode_steps, rollout=rollout, batch_size=batch_size,
                    checkpoint_every=checkpoint_every, obs=obs, obs_size=obs_size,
-                   minimap=minimap, processes=processes, device=device, progress=progress)
+                   minimap=minimap, processes=processes, device=device, threads=threads,
+                   progress=progress)
     typer.echo(f"trained {train(cfg)}")
 
 

@@ -115,7 +115,7 @@ class Observer:
         if cfg.minimap:
             boxes["minimap"] = spaces.Box(0, 255, (len(self.minimap_channels), s, s), np.uint8)
         n_vec = len(features.Player) + 1 + n_funcs
-        boxes["vector"] = spaces.Box(0.0, np.inf, (n_vec,), np.float32)
+        boxes["vector"] = spaces.Box(0.0, 32.0, (n_vec,), np.float32)  # log1p(2**31) < 22
         self.space = spaces.Dict(boxes)
         self.layers = frozenset(
             ["screen/unit_type", "screen/player_relative", "screen/selected"]

@@ -74,12 +74,16 @@ class RuleShaping(_Shaping):
         from sc2data.labels.registry import load_registry
 
         self.bonus = float(bonus)
-        self.rules: list[Rule] = [e.rule for e in load_registry().select(rule_ids)]
+        self.entries = list(load_registry().select(rule_ids))
+        self.rules: list[Rule] = [e.rule for e in self.entries]
         self.schema = schema_for(k for r in self.rules for k in r.requires if "/" in k)
 
     def shape(self, frames: Sequence[Mapping[str, Any]]) -> float:
+        from sc2data.labels.registry import call
+
         batch = stacks_of(frames, self.schema)
-        fired = sum(int(np.count_nonzero(rule(batch))) for rule in self.rules)
+        fired = sum(int(np.count_nonzero(call(e.rule, e.source, batch, "an RL decision's stacks")))
+                    for e in self.entries)
         return self.bonus * fired
 
 

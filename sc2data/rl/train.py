@@ -24,6 +24,7 @@ import csv
 import dataclasses
 import io
 import json
+import os
 import typing
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
@@ -34,7 +35,7 @@ import numpy as np
 
 from sc2data.errors import MissingDependencyError, Sc2DataError
 from sc2data.files import write_atomic
-from sc2data.formats import Shape, check_record
+from sc2data.formats import Shape, check_record, loads
 
 EVAL_SEED = 1_000_000
 """First evaluation episode seed (training's seeds stay below it)."""
@@ -63,7 +64,8 @@ class RLConfig:
     narration: str | None = None
     mem: str | None = None
     steps: int = 10_000
-    envs: int = 1
+    envs: int = 16
+    """Games stepped together: one batched policy call and one batched reward per step."""
     seed: int = 0
     bonus: float | None = None
     """Shaping bonus per rule firing (rules, default 0.1) or per matched command (narration, 1)."""
@@ -71,15 +73,15 @@ class RLConfig:
     patience: int = 0
     episode_steps: int | None = None
     """pysc2 steps per episode (simulator only); None: the map's 1,800."""
-    rollout: int = 256
+    rollout: int = 64
     """PPO rollout length per env (SB3's ``n_steps``)."""
-    batch_size: int = 64
+    batch_size: int = 256
     checkpoint_every: int = 2048
     layers: str = "paper"
     backend: str = "sim"
     obs: str = "compact"
     """What the policy sees (:mod:`sc2data.rl.obs`): ``compact`` or ``stored``."""
-    obs_size: int = 64
+    obs_size: int = 32
     """``compact``: 64 or 32 pixels a side."""
     minimap: bool = False
     """``compact``: add the minimap's channels."""
@@ -88,9 +90,13 @@ class RLConfig:
     one env. Changes nothing but speed, so it may differ on resume."""
     device: str = "auto"
     """Where the policy and the MEM run: ``cpu``, ``cuda`` or ``auto`` (cuda where present)."""
+    threads: int | None = None
+    """Torch threads of the learner (policy, MEM, PPO's updates); None: one per core. The
+    games' workers wait while the learner works, so its threads take no core from them: two
+    threads halved an update on this project's 2-core machine (BENCHMARKS.md, "RL at speed")."""
     progress: bool | None = None
 
-    RESUMABLE = ("steps", "progress", "out", "processes", "device")
+    RESUMABLE = ("steps", "progress", "out", "processes", "device", "threads")
     LEGACY: typing.ClassVar[dict[str, Any]] = {"obs": "stored", "obs_size": 64, "minimap": False}
     """Settings added since runs were first written, as those runs had them: a run folder whose
     ``config.json`` lacks one was trained so."""
@@ -136,10 +142,20 @@ def check_values(cfg: RLConfig) -> None:
         raise Sc2DataError(f"--seed must lie in [0, {EVAL_SEED - 100_000})")
     if cfg.processes is not None and cfg.processes < 0:
         raise Sc2DataError("--processes must be 0 or more")
+    if cfg.threads is not None and cfg.threads < 1:
+        raise Sc2DataError("--threads must be at least 1")
     cfg.obs_config().check()
 
 
 DEVICES: tuple[str, ...] = ("auto", "cpu", "cuda")
+
+
+def cores() -> int:
+    """The cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
 
 
 def resolve_device(name: str) -> str:
@@ -223,7 +239,7 @@ def _read_json(path: Path, shape: Shape) -> dict[str, Any]:
     """A run record, checked to have ``shape``."""
     remedy = f"delete {path.parent} and train it again, or pick another --out"
     try:
-        record = json.loads(path.read_text())
+        record = loads(path.read_bytes())
     except (OSError, ValueError) as e:
         raise Sc2DataError(f"cannot read {path}: {e}; {remedy}") from None
     check_record(record, shape, path, remedy)
@@ -239,7 +255,7 @@ def read_config(run: Path) -> dict[str, Any]:
     had them (:attr:`RLConfig.LEGACY`)."""
     path = run / "config.json"
     try:
-        record = json.loads(path.read_text())
+        record = loads(path.read_bytes())
     except (OSError, ValueError) as e:
         raise Sc2DataError(f"cannot read {path}: {e}; delete {run} and train it again, or pick "
                            f"another --out") from None
@@ -297,7 +313,9 @@ def train(cfg: RLConfig) -> Path:
 
     from sc2data.progress import bar
 
-    torch.set_num_threads(1)
+    # The learner and the games' workers take turns (a vector step, then the batched reward and
+    # policy; PPO's update while the workers wait), so the learner may use every core.
+    torch.set_num_threads(cfg.threads or cores())
     device = resolve_device(cfg.device)
     run.mkdir(parents=True, exist_ok=True)
     _write_json(run / "config.json", cfg.identity())

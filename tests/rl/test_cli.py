@@ -11,7 +11,8 @@ import pytest
 from tests.cli import assert_one_line_error, run_cli
 from tests.mem_helpers import tiny_pairset, train_tiny
 
-TINY = ["--steps", "96", "--rollout", "32", "--batch-size", "32", "--episode-steps", "40",
+TINY = ["--steps", "96", "--envs", "1", "--rollout", "32", "--batch-size", "32",
+        "--episode-steps", "40",
         "--checkpoint-every", "64", "--no-progress"]
 
 
@@ -89,6 +90,11 @@ def test_narration_training_with_a_tiny_mem(mem_run: Path, tmp_path: Path,
     (["--reward", "narration"], ("--mem",)),
     (["--reward", "narration", "--mem", "/nonexistent/run"], ("does not exist",)),
     (["--steps", "0"], ("--steps",)),
+    (["--obs", "pixels"], ("unknown obs", "compact")),
+    (["--obs-size", "48"], ("--obs-size",)),
+    (["--processes", "-1"], ("--processes",)),
+    (["--threads", "0"], ("--threads",)),
+    (["--device", "tpu"], ("unknown device", "cuda")),
     (["--mem", "x"], ("--reward narration",)),
 ])
 def test_bad_input_is_one_line_and_writes_nothing(
@@ -170,3 +176,14 @@ def test_seed_band_spans_the_episodes_every_run_reached() -> None:
     xs, mean, lo, hi = seed_band([a, b])
     assert xs.tolist() == [11.0, 21.0]
     assert mean.tolist() == [2.0, 3.0] and lo.tolist() == [1.0, 2.0] and hi.tolist() == [3.0, 4.0]
+
+
+def test_cuda_without_a_gpu_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import torch
+
+    if torch.cuda.is_available():
+        pytest.skip("a CUDA GPU is present here")
+    run = tmp_path / "run"
+    code, _, err = run_cli(["rl", "train", "--out", run, *TINY, "--device", "cuda"], capsys)
+    assert_one_line_error(code, err, "--device cuda", "no CUDA GPU")
+    assert not run.exists()

@@ -121,6 +121,20 @@ class BatchedNarration:
         return bonus, infos
 
 
+class BatchedZero:
+    """:class:`~sc2data.rl.rewards.ZeroReward` for all games: the game's reward taken away."""
+
+    schema = None
+    game_weight = 0.0
+
+    def reset(self, n: int) -> None:
+        """Nothing to remember."""
+
+    def __call__(self, frames: Mapping[str, np.ndarray], n_frames: np.ndarray,
+                 done: np.ndarray) -> tuple[np.ndarray, list[dict[str, Any]]]:
+        return np.zeros(len(n_frames)), [{} for _ in n_frames]
+
+
 def make_shaping(reward: str, *, scorer: Any = None, narration: Narration | None = None,
                  bonus: float | None = None, threshold: float = 0.5, patience: int = 0) -> Any:
     """The batched shaping of ``reward`` (None for the game's sparse reward)."""
@@ -128,6 +142,8 @@ def make_shaping(reward: str, *, scorer: Any = None, narration: Narration | None
 
     if reward == "sparse":
         return None
+    if reward == "zero":
+        return BatchedZero()
     if reward == "rules":
         return BatchedRules(bonus=0.1 if bonus is None else bonus)
     if reward == "narration":

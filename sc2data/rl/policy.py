@@ -1,7 +1,9 @@
 """The policy's feature extractors: small CNNs over the observation's images plus its vector.
 
 :class:`StateExtractor` reads the ``stored`` observation (:mod:`sc2data.rl.obs`),
-:class:`CompactExtractor` the ``compact`` one. SB3's default ``CombinedExtractor`` would flatten every 64×64 layer into one MLP input (80k
+:class:`CompactExtractor` the ``compact`` one (and is the trunk of the paper space's
+:class:`~sc2data.rl.spatial.PaperPolicy`). SB3's default ``CombinedExtractor`` would flatten every
+64×64 layer into one MLP input (80k
 inputs with the paper's layers). Instead each layer is scaled to [0, 1] by its pysc2 scale,
 screen and minimap layers go through their own two-layer strided CNN (64 → 16 → 8 pixels), and
 the non-spatial vectors through ``log1p`` and a linear layer; the three are concatenated and
@@ -82,6 +84,14 @@ class CompactExtractor(BaseFeaturesExtractor):
                                   nn.ReLU())
 
     def forward(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
-        parts = [cnn(obs[k].float() / getattr(self, f"scale_{k}")) for k, cnn in self.cnns.items()]
+        screen = self.cnns["screen"][:2](obs["screen"].float() / self.scale_screen)
+        return self.head_from(screen, obs)
+
+    def head_from(self, screen: torch.Tensor, obs: dict[str, torch.Tensor]) -> torch.Tensor:
+        """The features, from the screen tower's first layer's output (``PaperPolicy`` reads
+        that map too) and the rest of the observation."""
+        parts = [self.cnns["screen"][2:](screen)]
+        parts += [self.cnns[k](obs[k].float() / getattr(self, f"scale_{k}"))
+                  for k in self.images if k != "screen"]
         parts.append(self.vec(obs["vector"].float()))
         return self.head(torch.cat(parts, dim=1))  # type: ignore[no-any-return]

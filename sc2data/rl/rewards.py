@@ -23,7 +23,8 @@ from sc2data.rl.narration import Narration, check_readable
 from sc2data.rulebase import Rule, schema_for, stack
 from sc2data.schema import Schema, StackBatch
 
-REWARDS: tuple[str, ...] = ("sparse", "rules", "narration")
+REWARDS: tuple[str, ...] = ("sparse", "rules", "narration", "zero")
+"""``zero`` is a control: no reward at all, to see what PPO's updates do with no signal."""
 
 
 def stacks_of(frames: Sequence[Mapping[str, Any]], schema: Schema) -> StackBatch:
@@ -49,6 +50,17 @@ class _Shaping(gym.Wrapper):  # type: ignore[type-arg]
         """The bonus for the decision whose pysc2 observations are ``frames`` (the decision's
         first frame is the previous decision's last); each reward mode defines it."""
         raise NotImplementedError
+
+
+class ZeroReward(_Shaping):
+    """No reward: ``r = 0`` (the game's score still counts in ``info["game_reward"]``)."""
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = super().step(action)
+        return obs, 0.0, terminated, truncated, {**info, "shaping": -info["game_reward"]}
+
+    def shape(self, frames: Sequence[Mapping[str, Any]]) -> float:
+        return 0.0
 
 
 class SparseReward(_Shaping):
@@ -157,6 +169,8 @@ def wrap_reward(env: gym.Env, reward: str, *, scorer: Any = None,  # type: ignor
     """``env`` under the reward wrapper named ``reward`` (one of :data:`REWARDS`)."""
     if reward == "sparse":
         return SparseReward(env)
+    if reward == "zero":
+        return ZeroReward(env)
     if reward == "rules":
         return RuleShaping(env, bonus=0.1 if bonus is None else bonus)
     if reward == "narration":

@@ -94,10 +94,28 @@ class RLConfig:
     """Torch threads of the learner (policy, MEM, PPO's updates); None: one per core. The
     games' workers wait while the learner works, so its threads take no core from them: two
     threads halved an update on this project's 2-core machine (BENCHMARKS.md, "RL at speed")."""
+    policy: str = "auto"
+    """``spatial`` (the paper space: a point given the function, :mod:`sc2data.rl.spatial`),
+    ``independent`` (SB3's heads: function, x and y apart) or ``auto``: spatial for the paper
+    space on the compact observation, independent otherwise."""
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    epochs: int = 4
+    """PPO epochs over each rollout."""
+    ent_coef: float = 0.01
+    normalize_advantage: bool = False
+    """Advantages normalised per minibatch (SB3's default): with a value function that explains
+    nothing yet, each update is then a full clipped step of noise, and a zero-reward control
+    drifts from its initial policy (tests/rl/test_control.py)."""
+    target_kl: float | None = 0.05
+    """Stop an update's epochs early once the policy moved this far (approximate KL)."""
     progress: bool | None = None
 
     RESUMABLE = ("steps", "progress", "out", "processes", "device", "threads")
-    LEGACY: typing.ClassVar[dict[str, Any]] = {"obs": "stored", "obs_size": 64, "minimap": False}
+    LEGACY: typing.ClassVar[dict[str, Any]] = {
+        "obs": "stored", "obs_size": 64, "minimap": False, "policy": "independent", "gamma": 0.99,
+        "gae_lambda": 0.95, "epochs": 4, "ent_coef": 0.01, "normalize_advantage": True,
+        "target_kl": None}
     """Settings added since runs were first written, as those runs had them: a run folder whose
     ``config.json`` lacks one was trained so."""
 
@@ -145,6 +163,19 @@ def check_values(cfg: RLConfig) -> None:
     if cfg.threads is not None and cfg.threads < 1:
         raise Sc2DataError("--threads must be at least 1")
     cfg.obs_config().check()
+    if cfg.policy not in POLICIES:
+        raise Sc2DataError(f"unknown policy {cfg.policy!r}; choose one of: {', '.join(POLICIES)}")
+    if cfg.policy == "spatial" and (cfg.action_space != "paper" or cfg.obs != "compact"):
+        raise Sc2DataError("--policy spatial needs --action-space paper and --obs compact")
+    for name in ("gamma", "gae_lambda"):
+        if not 0.0 <= getattr(cfg, name) <= 1.0:
+            raise Sc2DataError(f"--{name.replace('_', '-')} must lie in [0, 1]")
+    if cfg.epochs < 1:
+        raise Sc2DataError("--epochs must be at least 1")
+    if not (cfg.ent_coef >= 0.0 and cfg.ent_coef < float("inf")):
+        raise Sc2DataError("--ent-coef must be a finite number, 0 or more")
+    if cfg.target_kl is not None and not 0.0 < cfg.target_kl < float("inf"):
+        raise Sc2DataError("--target-kl must be a positive finite number")
 
 
 DEVICES: tuple[str, ...] = ("auto", "cpu", "cuda")
@@ -222,6 +253,38 @@ def make_vec_env(cfg: RLConfig, scorer: Any = None, narration: Any = None) -> An
                            threshold=cfg.threshold, patience=cfg.patience)
     game = GameConfig(cfg.action_space, cfg.backend, cfg.obs_config(), game_loops(cfg))
     return BuildMarinesVecEnv(game, cfg.envs, processes=cfg.processes, shaping=shaping)
+
+
+def new_model(cfg: RLConfig, vec: Any, seed: int, device: str = "cpu") -> Any:
+    """An untrained MaskablePPO agent of the run's settings on ``vec`` (seeded: the same seed
+    gives the same initial policy)."""
+    from sb3_contrib import MaskablePPO
+
+    return MaskablePPO(
+        policy_class(cfg), vec, n_steps=cfg.rollout, batch_size=cfg.batch_size,
+        n_epochs=cfg.epochs, learning_rate=3e-4, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda,
+        ent_coef=cfg.ent_coef, normalize_advantage=cfg.normalize_advantage,
+        target_kl=cfg.target_kl, seed=seed, device=device, verbose=0,
+        policy_kwargs=policy_kwargs(cfg))
+
+
+POLICIES: tuple[str, ...] = ("auto", "spatial", "independent")
+
+
+def resolved_policy(cfg: RLConfig) -> str:
+    """``spatial`` or ``independent`` (see :attr:`RLConfig.policy`)."""
+    if cfg.policy != "auto":
+        return cfg.policy
+    return "spatial" if cfg.action_space == "paper" and cfg.obs == "compact" else "independent"
+
+
+def policy_class(cfg: RLConfig) -> Any:
+    """The policy MaskablePPO builds: :class:`~sc2data.rl.spatial.PaperPolicy` or SB3's."""
+    if resolved_policy(cfg) == "spatial":
+        from sc2data.rl.spatial import PaperPolicy
+
+        return PaperPolicy
+    return "MultiInputPolicy"
 
 
 def policy_kwargs(cfg: RLConfig) -> dict[str, Any]:
@@ -327,10 +390,7 @@ def train(cfg: RLConfig) -> Path:
             model = MaskablePPO.load(run / "model.zip", env=vec, device=device)
             model.set_random_seed(seed)
         else:
-            model = MaskablePPO(
-                "MultiInputPolicy", vec, n_steps=cfg.rollout, batch_size=cfg.batch_size,
-                n_epochs=4, learning_rate=3e-4, gamma=0.99, ent_coef=0.01, seed=seed,
-                device=device, verbose=0, policy_kwargs=policy_kwargs(cfg))
+            model = new_model(cfg, vec, seed, device)
 
         class Curve(BaseCallback):
             """Episode rows, the progress bar and periodic checkpoints."""

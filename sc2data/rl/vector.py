@@ -259,9 +259,10 @@ class BuildMarinesVecEnv(VecEnv):
                  shaping: Any = None) -> None:
         if n < 1:
             raise Sc2DataError("--envs must be at least 1")
-        if shaping is not None and cfg.frames is None:
+        if shaping is not None and cfg.frames is None and shaping.schema is not None:
             cfg = GameConfig(cfg.action_space, cfg.backend, cfg.obs, cfg.game_loops,
                              shaping.schema)
+        self.game_weight = float(getattr(shaping, "game_weight", 1.0))
         self.cfg, self.shaping = cfg, shaping
         k = default_processes(n) if processes is None else int(processes)
         if k < 0:
@@ -382,6 +383,7 @@ class BuildMarinesVecEnv(VecEnv):
         extra_info: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
         if self.shaping is not None:
             extra, extra_info = self.shaping(self.frame_arrays, a["n_frames"], done)
+            extra = extra + (self.game_weight - 1.0) * game  # a control may take the game's away
         infos: list[dict[str, Any]] = []
         for i in range(self.num_envs):
             info = {"game_reward": float(game[i]), "shaping": float(extra[i]),

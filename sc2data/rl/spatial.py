@@ -1,0 +1,182 @@
+"""The paper space's policy: a pysc2 function, then its screen point *given* the function.
+
+SC2LE (Vinyals et al. 2017) chooses a function, then each argument given the function; a screen
+point comes from a convolutional map with one logit per pixel, so one distribution can put mass
+on several units ("click this SCV or that one"). :class:`PaperPolicy` does that, small:
+
+* a trunk over the ``compact`` observation (:class:`~sc2data.rl.policy.CompactExtractor`'s: an
+  S/8 stride-S/8 convolution to 8×8×32, a 3×3 stride-2 one to 4×4×32, the vector, a linear layer
+  to 256 features) gives the function logits (masked by ``available_actions``) and the value;
+* for each of the functions that take a screen point (:data:`POINT_FUNCTIONS`) a 64×64 map of
+  logits: a *fine* term, a 1×1 convolution over the observation's channels (where SCVs, minerals,
+  free ground are), plus a *coarse* one, a 1×1 convolution over the trunk's 8×8 map plus a
+  learnt 8×8 preference given the features, each upsampled to 64×64;
+* :class:`PointDistribution`: ``log π(a) = log π(f) + [f takes a point] · log π(x, y | f)`` and
+  entropy ``H(f) + Σ_f π(f) H(x, y | f)``: an argument the chosen function ignores counts in
+  neither. The most likely action is the most likely function and, for it, its most likely pixel.
+
+The env's action stays ``MultiDiscrete([10, 64, 64])``: ``(function, x, y)``, x the column and y
+the row, as :func:`~sc2data.rl.envs.paper_call` reads it.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch
+from gymnasium import spaces
+from sb3_contrib.common.maskable.policies import MaskableMultiInputActorCriticPolicy
+from stable_baselines3.common.preprocessing import preprocess_obs
+from torch import nn
+from torch.nn import functional as F
+
+from sc2data.rl.envs import PAPER_FUNCTIONS
+from sc2data.rl.policy import CompactExtractor
+from sc2data.vocab import SCREEN_SIZE
+
+POINT_FUNCTIONS: tuple[str, ...] = ("select_point", "select_rect", "Build_SupplyDepot_screen",
+                                    "Build_Barracks_screen", "Harvest_Gather_screen")
+"""The paper functions whose call takes a screen point (:func:`~sc2data.rl.envs.paper_call`)."""
+
+_N = SCREEN_SIZE
+_COARSE = 8
+
+
+class PointDistribution:
+    """The joint distribution of ``(function, x, y)`` (see the module docstring), with
+    sb3-contrib's masked-distribution methods."""
+
+    def __init__(self, function_logits: torch.Tensor, point_logits: torch.Tensor) -> None:
+        self.function_logits = function_logits
+        """(B, functions)"""
+        self.point_logits = point_logits
+        """(B, point functions, 64·64)"""
+        n = function_logits.shape[1]
+        slot = torch.full((n,), -1, dtype=torch.long)
+        for j, name in enumerate(POINT_FUNCTIONS):
+            slot[PAPER_FUNCTIONS.index(name)] = j
+        self.slot = slot.to(function_logits.device)
+        """function index → its point map, or -1"""
+
+    def apply_masking(self, masks: Any) -> None:
+        """Mask the functions (the first entries of sb3-contrib's per-dimension masks; the
+        screen point is never masked)."""
+        if masks is None:
+            return
+        m = torch.as_tensor(np.asarray(masks), device=self.function_logits.device)
+        m = m.reshape(len(self.function_logits), -1)[:, :self.function_logits.shape[1]].bool()
+        self.function_logits = torch.where(m, self.function_logits,
+                                           torch.full_like(self.function_logits, -1e8))
+
+    def _function_log_probs(self) -> torch.Tensor:
+        return F.log_softmax(self.function_logits, dim=1)
+
+    def _point_map(self, functions: torch.Tensor) -> torch.Tensor:
+        """(B, 64·64) logits of each row's function (zeros where it takes no point)."""
+        slot = self.slot[functions]
+        maps = self.point_logits.gather(1, slot.clamp(min=0)[:, None, None].expand(
+            -1, 1, self.point_logits.shape[2])).squeeze(1)
+        return maps * (slot >= 0)[:, None]
+
+    def log_prob(self, actions: torch.Tensor) -> torch.Tensor:
+        a = actions.long().reshape(-1, 3)
+        f, x, y = a[:, 0], a[:, 1], a[:, 2]
+        lp = self._function_log_probs().gather(1, f[:, None]).squeeze(1)
+        point = F.log_softmax(self._point_map(f), dim=1).gather(1, (y * _N + x)[:, None])
+        return lp + point.squeeze(1) * (self.slot[f] >= 0)
+
+    def entropy(self) -> torch.Tensor:
+        logp = self._function_log_probs()
+        p = logp.exp()
+        h_f = -(p * logp).sum(1)
+        lq = F.log_softmax(self.point_logits, dim=2)
+        h_point = -(lq.exp() * lq).sum(2)  # (B, point functions)
+        p_point = p[:, [PAPER_FUNCTIONS.index(n) for n in POINT_FUNCTIONS]]
+        return h_f + (p_point * h_point).sum(1)
+
+    def get_actions(self, deterministic: bool = False) -> torch.Tensor:
+        if deterministic:
+            f = self.function_logits.argmax(1)
+            idx = self._point_map(f).argmax(1)
+        else:
+            f = torch.distributions.Categorical(logits=self.function_logits).sample()
+            idx = torch.distributions.Categorical(logits=self._point_map(f)).sample()
+        return torch.stack([f, idx % _N, idx // _N], dim=1)
+
+
+class PaperPolicy(MaskableMultiInputActorCriticPolicy):
+    """MaskablePPO's policy for the paper space on the ``compact`` observation (see the module
+    docstring). Built with ``features_extractor_class=CompactExtractor``, whose trunk it reuses;
+    SB3's MLP extractor is left empty."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("features_extractor_class", CompactExtractor)
+        kwargs["net_arch"] = []
+        super().__init__(*args, **kwargs)
+
+    def _build(self, lr_schedule: Any) -> None:
+        self._build_mlp_extractor()
+        fe = self.features_extractor
+        assert isinstance(fe, CompactExtractor), "PaperPolicy reads a compact observation"
+        screen = self.observation_space["screen"]  # type: ignore[index]
+        channels, size = int(screen.shape[0]), int(screen.shape[1])
+        n_fn, n_pt = len(PAPER_FUNCTIONS), len(POINT_FUNCTIONS)
+        self.up_fine = _N // size
+        self.action_net = nn.Linear(fe.features_dim, n_fn)
+        self.value_net = nn.Linear(fe.features_dim, 1)
+        self.fine = nn.Conv2d(channels, n_pt, 1)
+        self.coarse = nn.Conv2d(32, n_pt, 1)
+        self.where = nn.Linear(fe.features_dim, n_pt * _COARSE * _COARSE)
+        if self.ortho_init:
+            for module, gain in ((fe, np.sqrt(2)), (self.action_net, 0.01), (self.value_net, 1.0),
+                                 (self.fine, 0.01), (self.coarse, 0.01), (self.where, 0.01)):
+                module.apply(lambda m, g=gain: self.init_weights(m, gain=g))
+        self.optimizer = self.optimizer_class(self.parameters(), lr=lr_schedule(1),
+                                              **self.optimizer_kwargs)
+
+    def _heads(self, obs: Any) -> tuple[PointDistribution, torch.Tensor]:
+        x = preprocess_obs(obs, self.observation_space, normalize_images=False)
+        fe: CompactExtractor = self.features_extractor  # type: ignore[assignment]
+        screen = x["screen"].float() / fe.scale_screen  # type: ignore[index, operator]
+        trunk = fe.cnns["screen"]
+        first = torch.relu(trunk[0](screen))  # (B, 32, 8, 8)
+        h = fe.head_from(first, x)
+        b = len(h)
+        coarse = self.coarse(first) + self.where(h).view(b, -1, _COARSE, _COARSE)
+        fine = self.fine(screen)
+        points = (F.interpolate(coarse, scale_factor=_N // _COARSE, mode="nearest")
+                  + F.interpolate(fine, scale_factor=self.up_fine, mode="nearest")
+                  if self.up_fine > 1 else fine + F.interpolate(
+                      coarse, scale_factor=_N // _COARSE, mode="nearest"))
+        return (PointDistribution(self.action_net(h), points.reshape(b, len(POINT_FUNCTIONS), -1)),
+                self.value_net(h))
+
+    def forward(self, obs: Any, deterministic: bool = False,
+                action_masks: np.ndarray | None = None
+                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        dist, values = self._heads(obs)
+        dist.apply_masking(action_masks)
+        actions = dist.get_actions(deterministic=deterministic)
+        return actions, values, dist.log_prob(actions)
+
+    def evaluate_actions(self, obs: Any, actions: torch.Tensor,
+                         action_masks: Any = None) -> tuple[torch.Tensor, torch.Tensor,
+                                                            torch.Tensor]:
+        dist, values = self._heads(obs)
+        dist.apply_masking(action_masks)
+        return values, dist.log_prob(actions), dist.entropy()
+
+    def get_distribution(self, obs: Any, action_masks: np.ndarray | None = None
+                         ) -> PointDistribution:  # type: ignore[override]
+        dist, _ = self._heads(obs)
+        dist.apply_masking(action_masks)
+        return dist
+
+    def predict_values(self, obs: Any) -> torch.Tensor:
+        return self._heads(obs)[1]
+
+
+def supports(observation_space: spaces.Space[Any]) -> bool:
+    """Whether :class:`PaperPolicy` can read this observation (a compact one)."""
+    return isinstance(observation_space, spaces.Dict) and "screen" in observation_space.spaces

@@ -1,0 +1,131 @@
+"""PPO with no reward must not move the policy: the zero-reward control, and the spatial policy's
+distribution against hand computations."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from sc2data.rl.envs import PAPER_FUNCTIONS
+from sc2data.rl.spatial import POINT_FUNCTIONS, PaperPolicy, PointDistribution
+from sc2data.rl.train import RLConfig, make_vec_env, new_model, train
+
+CONTROL = dict(action_space="paper", reward="zero", steps=2048, envs=8, rollout=64,
+               batch_size=256, episode_steps=200, checkpoint_every=10**6, progress=False, seed=3,
+               processes=0, threads=1)
+
+
+def _policy_kl(run: Path, cfg: RLConfig) -> float:
+    """Mean KL(initial ‖ trained) of the function head over states the initial policy visits."""
+    from sb3_contrib import MaskablePPO
+
+    vec = make_vec_env(cfg)
+    try:
+        first = new_model(cfg, vec, cfg.seed)
+        trained = MaskablePPO.load(run / "model.zip", device="cpu")
+        vec.seed(1234)
+        obs = vec.reset()
+        batches = []
+        for _ in range(12):
+            masks = vec.action_masks()
+            batches.append(({k: v.copy() for k, v in obs.items()}, masks))
+            acts, _ = first.predict(obs, action_masks=masks)
+            obs, *_ = vec.step(acts)
+    finally:
+        vec.close()
+    kls = []
+    with torch.no_grad():
+        for o, m in batches:
+            t = first.policy.obs_to_tensor(o)[0]
+            p = first.policy.get_distribution(t, m)
+            q = trained.policy.get_distribution(t, m)
+            lp = torch.log_softmax(p.function_logits, 1)
+            lq = torch.log_softmax(q.function_logits, 1)
+            kls.append(float((lp.exp() * (lp - lq)).sum(1).mean()))
+    return float(np.mean(kls))
+
+
+@pytest.mark.slow
+def test_zero_reward_control_stays_at_the_initial_policy(tmp_path: Path) -> None:
+    """With no reward, the defaults (advantages not normalised, an early stop at target_kl)
+    leave the policy where it started; SB3's normalised advantages move it (the drift the
+    control is there to catch: each update a full clipped step of noise)."""
+    still = RLConfig(out=str(tmp_path / "still"), **CONTROL)  # type: ignore[arg-type]
+    moved = RLConfig(out=str(tmp_path / "moved"), normalize_advantage=True, target_kl=None,
+                     **CONTROL)  # type: ignore[arg-type]
+    train(still)
+    train(moved)
+    kl_still, kl_moved = _policy_kl(tmp_path / "still", still), _policy_kl(tmp_path / "moved",
+                                                                          moved)
+    assert kl_still < 0.002, kl_still
+    assert kl_moved > 5 * kl_still, (kl_moved, kl_still)
+
+
+def _dist(b: int = 2) -> PointDistribution:
+    g = torch.Generator().manual_seed(0)
+    fn = torch.randn(b, len(PAPER_FUNCTIONS), generator=g)
+    pts = torch.randn(b, len(POINT_FUNCTIONS), 64 * 64, generator=g)
+    return PointDistribution(fn, pts)
+
+
+def test_point_log_prob_counts_the_point_only_for_functions_that_take_one() -> None:
+    d = _dist()
+    takes = PAPER_FUNCTIONS.index("Build_Barracks_screen")
+    plain = PAPER_FUNCTIONS.index("Train_Marine_quick")
+    acts = torch.tensor([[takes, 5, 7], [plain, 5, 7]])
+    lp = d.log_prob(acts)
+    lf = torch.log_softmax(d.function_logits, 1)
+    slot = POINT_FUNCTIONS.index("Build_Barracks_screen")
+    lpt = torch.log_softmax(d.point_logits[0, slot], 0)[7 * 64 + 5]
+    assert torch.allclose(lp[0], lf[0, takes] + lpt)
+    assert torch.allclose(lp[1], lf[1, plain])  # x and y ignored: no mass, no entropy
+    other = d.log_prob(torch.tensor([[takes, 5, 7], [plain, 60, 1]]))
+    assert torch.allclose(other[1], lp[1])
+
+
+def test_point_entropy_is_the_joint_entropy_by_hand() -> None:
+    d = _dist(1)
+    lf = torch.log_softmax(d.function_logits[0], 0)
+    h = -(lf.exp() * lf).sum()
+    for j, name in enumerate(POINT_FUNCTIONS):
+        lq = torch.log_softmax(d.point_logits[0, j], 0)
+        h = h + lf[PAPER_FUNCTIONS.index(name)].exp() * -(lq.exp() * lq).sum()
+    assert torch.allclose(d.entropy()[0], h)
+
+
+def test_masked_functions_get_no_mass_and_argmax_follows_the_maps() -> None:
+    d = _dist(1)
+    mask = np.zeros((1, len(PAPER_FUNCTIONS) + 128), bool)
+    build = PAPER_FUNCTIONS.index("Build_SupplyDepot_screen")
+    mask[0, build] = mask[0, PAPER_FUNCTIONS.index("no_op")] = True
+    mask[0, len(PAPER_FUNCTIONS):] = True
+    d.point_logits[0, POINT_FUNCTIONS.index("Build_SupplyDepot_screen")] = -5.0
+    d.point_logits[0, POINT_FUNCTIONS.index("Build_SupplyDepot_screen"), 30 * 64 + 12] = 9.0
+    d.function_logits[0, build] = 50.0
+    d.apply_masking(mask)
+    assert torch.equal(d.get_actions(deterministic=True)[0], torch.tensor([build, 12, 30]))
+    for _ in range(20):
+        assert int(d.get_actions()[0, 0]) in (build, PAPER_FUNCTIONS.index("no_op"))
+
+
+def test_the_spatial_policy_plays_masked_calls_only(tmp_path: Path) -> None:
+    cfg = RLConfig(out=str(tmp_path / "r"), action_space="paper", envs=2, processes=0,
+                   episode_steps=30)
+    vec = make_vec_env(cfg)
+    try:
+        model = new_model(cfg, vec, 0)
+        assert isinstance(model.policy, PaperPolicy)
+        vec.seed(0)
+        obs = vec.reset()
+        for _ in range(40):
+            masks = vec.action_masks()
+            for deterministic in (True, False):
+                acts, _ = model.predict(obs, deterministic=deterministic, action_masks=masks)
+                assert all(masks[i, a[0]] for i, a in enumerate(acts))
+            obs, _, _, infos = vec.step(acts)
+            assert not any(i["invalid"] for i in infos)
+    finally:
+        vec.close()

@@ -7,13 +7,17 @@ on several units ("click this SCV or that one"). :class:`PaperPolicy` does that,
 * a trunk over the ``compact`` observation (:class:`~sc2data.rl.policy.CompactExtractor`'s: an
   S/8 stride-S/8 convolution to 8×8×32, a 3×3 stride-2 one to 4×4×32, the vector, a linear layer
   to 256 features) gives the function logits (masked by ``available_actions``) and the value;
-* for each of the functions that take a screen point (:data:`POINT_FUNCTIONS`) a 64×64 map of
-  logits: a *fine* term, a 1×1 convolution over the observation's channels (where SCVs, minerals,
-  free ground are), plus a *coarse* one, a 1×1 convolution over the trunk's 8×8 map plus a
-  learnt 8×8 preference given the features, each upsampled to 64×64;
+* for each of the functions that take a screen point (:data:`POINT_FUNCTIONS`) a map of logits at
+  the observation's resolution (S×S cells of 64/S pixels): a *fine* term, a 1×1 convolution over
+  the observation's channels (where SCVs, minerals, free ground are), plus a *coarse* one, a 1×1
+  convolution over the trunk's 8×8 map plus a learnt 8×8 preference given the features,
+  upsampled to S×S. A pixel's probability is its cell's shared evenly by the cell's pixels (the
+  observation cannot tell them apart): at S = 32 the maps are a quarter of 64×64's cost;
 * :class:`PointDistribution`: ``log π(a) = log π(f) + [f takes a point] · log π(x, y | f)`` and
   entropy ``H(f) + Σ_f π(f) H(x, y | f)``: an argument the chosen function ignores counts in
-  neither. The most likely action is the most likely function and, for it, its most likely pixel.
+  neither (the value is the joint entropy; its gradient holds π(f) fixed in the second term, so
+  the bonus does not favour functions for having a point to spread). The most likely action is
+  the most likely function and, for it, the centre of its most likely cell.
 
 The env's action stays ``MultiDiscrete([10, 64, 64])``: ``(function, x, y)``, x the column and y
 the row, as :func:`~sc2data.rl.envs.paper_call` reads it.
@@ -51,7 +55,9 @@ class PointDistribution:
         self.function_logits = function_logits
         """(B, functions)"""
         self.point_logits = point_logits
-        """(B, point functions, 64·64)"""
+        """(B, point functions, S·S): one logit per cell of 64/S × 64/S pixels"""
+        self.side = int(round(point_logits.shape[2] ** 0.5))
+        self.cell = _N // self.side
         n = function_logits.shape[1]
         slot = torch.full((n,), -1, dtype=torch.long)
         for j, name in enumerate(POINT_FUNCTIONS):
@@ -73,7 +79,7 @@ class PointDistribution:
         return F.log_softmax(self.function_logits, dim=1)
 
     def _point_map(self, functions: torch.Tensor) -> torch.Tensor:
-        """(B, 64·64) logits of each row's function (zeros where it takes no point)."""
+        """(B, S·S) logits of each row's function (zeros where it takes no point)."""
         slot = self.slot[functions]
         maps = self.point_logits.gather(1, slot.clamp(min=0)[:, None, None].expand(
             -1, 1, self.point_logits.shape[2])).squeeze(1)
@@ -83,26 +89,38 @@ class PointDistribution:
         a = actions.long().reshape(-1, 3)
         f, x, y = a[:, 0], a[:, 1], a[:, 2]
         lp = self._function_log_probs().gather(1, f[:, None]).squeeze(1)
-        point = F.log_softmax(self._point_map(f), dim=1).gather(1, (y * _N + x)[:, None])
-        return lp + point.squeeze(1) * (self.slot[f] >= 0)
+        c = self.cell
+        cell = (y // c) * self.side + x // c
+        point = F.log_softmax(self._point_map(f), dim=1).gather(1, cell[:, None]).squeeze(1)
+        point = point - 2.0 * float(np.log(c))  # a pixel's share of its cell
+        return lp + point * (self.slot[f] >= 0)
 
     def entropy(self) -> torch.Tensor:
         logp = self._function_log_probs()
         p = logp.exp()
         h_f = -(p * logp).sum(1)
         lq = F.log_softmax(self.point_logits, dim=2)
-        h_point = -(lq.exp() * lq).sum(2)  # (B, point functions)
-        p_point = p[:, [PAPER_FUNCTIONS.index(n) for n in POINT_FUNCTIONS]]
+        h_point = -(lq.exp() * lq).sum(2) + 2.0 * float(np.log(self.cell))  # (B, point funcs)
+        # π(f) held constant in the point term: each head's entropy regularises its own head.
+        # Differentiated through π(f), Σ π(f)·H(x, y | f) pays the policy for choosing the
+        # functions that take a point (their 4,096 pixels' entropy), whatever the reward:
+        # a zero-reward control drifted to them (tests/rl/test_control.py).
+        p_point = p[:, [PAPER_FUNCTIONS.index(n) for n in POINT_FUNCTIONS]].detach()
         return h_f + (p_point * h_point).sum(1)
 
     def get_actions(self, deterministic: bool = False) -> torch.Tensor:
-        if deterministic:
+        c = self.cell
+        if deterministic:  # the most likely function, its most likely cell, the cell's centre
             f = self.function_logits.argmax(1)
-            idx = self._point_map(f).argmax(1)
+            cell = self._point_map(f).argmax(1)
+            dx = dy = torch.full_like(cell, c // 2)
         else:
             f = torch.distributions.Categorical(logits=self.function_logits).sample()
-            idx = torch.distributions.Categorical(logits=self._point_map(f)).sample()
-        return torch.stack([f, idx % _N, idx // _N], dim=1)
+            cell = torch.distributions.Categorical(logits=self._point_map(f)).sample()
+            dx, dy = (torch.randint(c, cell.shape, device=cell.device) for _ in range(2))
+        x = (cell % self.side) * c + dx
+        y = (cell // self.side) * c + dy
+        return torch.stack([f, x, y], dim=1)
 
 
 class PaperPolicy(MaskableMultiInputActorCriticPolicy):
@@ -122,11 +140,13 @@ class PaperPolicy(MaskableMultiInputActorCriticPolicy):
         screen = self.observation_space["screen"]  # type: ignore[index]
         channels, size = int(screen.shape[0]), int(screen.shape[1])
         n_fn, n_pt = len(PAPER_FUNCTIONS), len(POINT_FUNCTIONS)
-        self.up_fine = _N // size
+        self.side = size
         self.action_net = nn.Linear(fe.features_dim, n_fn)
         self.value_net = nn.Linear(fe.features_dim, 1)
-        self.fine = nn.Conv2d(channels, n_pt, 1)
-        self.coarse = nn.Conv2d(32, n_pt, 1)
+        # 1×1 convolutions as matrix products: mkldnn's backward of a 13 → 5 channel 1×1
+        # convolution took longer than the whole trunk (torch profiler, batch 256, one thread).
+        self.fine = nn.Linear(channels, n_pt)
+        self.coarse = nn.Linear(32, n_pt)
         self.where = nn.Linear(fe.features_dim, n_pt * _COARSE * _COARSE)
         if self.ortho_init:
             for module, gain in ((fe, np.sqrt(2)), (self.action_net, 0.01), (self.value_net, 1.0),
@@ -143,14 +163,13 @@ class PaperPolicy(MaskableMultiInputActorCriticPolicy):
         first = torch.relu(trunk[0](screen))  # (B, 32, 8, 8)
         h = fe.head_from(first, x)
         b = len(h)
-        coarse = self.coarse(first) + self.where(h).view(b, -1, _COARSE, _COARSE)
-        fine = self.fine(screen)
-        points = (F.interpolate(coarse, scale_factor=_N // _COARSE, mode="nearest")
-                  + F.interpolate(fine, scale_factor=self.up_fine, mode="nearest")
-                  if self.up_fine > 1 else fine + F.interpolate(
-                      coarse, scale_factor=_N // _COARSE, mode="nearest"))
-        return (PointDistribution(self.action_net(h), points.reshape(b, len(POINT_FUNCTIONS), -1)),
-                self.value_net(h))
+        n_pt, s, r = len(POINT_FUNCTIONS), self.side, self.side // _COARSE
+        coarse = (_pointwise(self.coarse, first)
+                  + self.where(h).view(b, n_pt, _COARSE, _COARSE))  # (B, P, 8, 8)
+        fine = _pointwise(self.fine, screen).view(b, n_pt, _COARSE, r, _COARSE, r)
+        points = fine + coarse[:, :, :, None, :, None]  # each coarse cell over its r×r cells
+        return PointDistribution(self.action_net(h), points.reshape(b, n_pt, s * s)), \
+            self.value_net(h)
 
     def forward(self, obs: Any, deterministic: bool = False,
                 action_masks: np.ndarray | None = None
@@ -175,6 +194,13 @@ class PaperPolicy(MaskableMultiInputActorCriticPolicy):
 
     def predict_values(self, obs: Any) -> torch.Tensor:
         return self._heads(obs)[1]
+
+
+def _pointwise(layer: nn.Linear, x: torch.Tensor) -> torch.Tensor:
+    """A 1×1 convolution by ``layer`` of ``x`` (B, C, H, W) → (B, out, H, W)."""
+    b, c, hh, ww = x.shape
+    y = torch.matmul(layer.weight, x.reshape(b, c, hh * ww)) + layer.bias[None, :, None]
+    return y.view(b, -1, hh, ww)
 
 
 def supports(observation_space: spaces.Space[Any]) -> bool:

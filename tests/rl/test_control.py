@@ -64,10 +64,10 @@ def test_zero_reward_control_stays_at_the_initial_policy(tmp_path: Path) -> None
     assert kl_moved > 5 * kl_still, (kl_moved, kl_still)
 
 
-def _dist(b: int = 2) -> PointDistribution:
+def _dist(b: int = 2, side: int = 64) -> PointDistribution:
     g = torch.Generator().manual_seed(0)
     fn = torch.randn(b, len(PAPER_FUNCTIONS), generator=g)
-    pts = torch.randn(b, len(POINT_FUNCTIONS), 64 * 64, generator=g)
+    pts = torch.randn(b, len(POINT_FUNCTIONS), side * side, generator=g)
     return PointDistribution(fn, pts)
 
 
@@ -84,6 +84,23 @@ def test_point_log_prob_counts_the_point_only_for_functions_that_take_one() -> N
     assert torch.allclose(lp[1], lf[1, plain])  # x and y ignored: no mass, no entropy
     other = d.log_prob(torch.tensor([[takes, 5, 7], [plain, 60, 1]]))
     assert torch.allclose(other[1], lp[1])
+
+
+def test_a_cell_shares_its_probability_evenly_among_its_pixels() -> None:
+    d = _dist(1, side=32)
+    f = PAPER_FUNCTIONS.index("select_point")
+    slot = POINT_FUNCTIONS.index("select_point")
+    cell = torch.log_softmax(d.point_logits[0, slot], 0)[3 * 32 + 10]
+    lf = torch.log_softmax(d.function_logits, 1)[0, f]
+    for x, y in ((20, 6), (21, 6), (20, 7), (21, 7)):  # the four pixels of cell (10, 3)
+        lp = d.log_prob(torch.tensor([[f, x, y]]))[0]
+        assert torch.allclose(lp, lf + cell - np.log(4.0))
+    total = torch.logsumexp(torch.stack([d.log_prob(torch.tensor([[f, x, y]]))[0]
+                                         for x in range(64) for y in range(64)]), 0)
+    assert torch.allclose(total, lf, atol=1e-5)  # the 4,096 pixels sum to π(f)
+    for _ in range(10):
+        a = d.get_actions()[0]
+        assert 0 <= int(a[1]) < 64 and 0 <= int(a[2]) < 64
 
 
 def test_point_entropy_is_the_joint_entropy_by_hand() -> None:

@@ -57,13 +57,18 @@ def train_cmd(
     threads: Optional[int] = typer.Option(
         None, "--threads", help="Torch threads of the learner (policy, MEM, updates) [one per "
                                 "core]."),
+    tensorboard: bool = typer.Option(False, "--tensorboard",
+                                     help="Also write SB3's log as TensorBoard events "
+                                          "(RUN/logs/<session>/; needs tensorboard)."),
     device: str = typer.Option("auto", "--device", help="Policy and MEM on cpu, cuda or auto "
                                                         "(cuda where a GPU is present)."),
     progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",
                                             help="Progress bar [default: on a terminal]."),
 ) -> None:
     """Train a MaskablePPO agent; writes checkpoints and the learning curve (curve.csv/json)."""
-    from sc2data.rl.train import RLConfig, require_rl, train
+    import time
+
+    from sc2data.rl.train import RLConfig, require_rl, summary_line, train
 
     require_rl("sc2data rl train")
     cfg = RLConfig(out=str(out), action_space=action_space, reward=reward,
@@ -73,8 +78,11 @@ def train_cmd(
                    episode_steps=episode_steps, rollout=rollout, batch_size=batch_size,
                    checkpoint_every=checkpoint_every, obs=obs, obs_size=obs_size,
                    minimap=minimap, processes=processes, device=device, threads=threads,
+                   tensorboard=tensorboard,
                    progress=progress)
-    typer.echo(f"trained {train(cfg)}")
+    start = time.perf_counter()
+    run = train(cfg)
+    typer.echo(summary_line(run, time.perf_counter() - start))
 
 
 @app.command("evaluate")

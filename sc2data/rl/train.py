@@ -20,11 +20,11 @@ seeds ``EVAL_SEED + e``, a range training never uses while ``seed < 900,000``.
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import io
 import json
 import os
+import shutil
 import typing
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
@@ -34,14 +34,14 @@ from typing import Any
 import numpy as np
 
 from sc2data.errors import MissingDependencyError, Sc2DataError
-from sc2data.files import write_atomic
+from sc2data.files import FolderLock, check_out, write_atomic, writing
 from sc2data.formats import Shape, check_record, loads
+from sc2data.rl import runs
+from sc2data.rl.runs import CURVE_FIELDS, STATE_SHAPE  # noqa: F401  (names users import)
 
 EVAL_SEED = 1_000_000
 """First evaluation episode seed (training's seeds stay below it)."""
 
-CURVE_FIELDS: tuple[str, ...] = ("episode", "env", "timesteps", "env_steps", "marines",
-                                 "game_return", "return")
 
 
 def require_rl(purpose: str) -> None:
@@ -109,13 +109,18 @@ class RLConfig:
     drifts from its initial policy (tests/rl/test_control.py)."""
     target_kl: float | None = 0.05
     """Stop an update's epochs early once the policy moved this far (approximate KL)."""
+    smdp: bool = True
+    """Discount a decision of k pysc2 steps by γᵏ (:mod:`sc2data.rl.smdp`); the same as γ in
+    the paper space, where every decision is one step."""
+    tensorboard: bool = False
+    """Also write SB3's log as TensorBoard events (``RUN/logs/<session>/``)."""
     progress: bool | None = None
 
-    RESUMABLE = ("steps", "progress", "out", "processes", "device", "threads")
+    RESUMABLE = ("steps", "progress", "out", "processes", "device", "threads", "tensorboard")
     LEGACY: typing.ClassVar[dict[str, Any]] = {
         "obs": "stored", "obs_size": 64, "minimap": False, "policy": "independent", "gamma": 0.99,
         "gae_lambda": 0.95, "epochs": 4, "ent_coef": 0.01, "normalize_advantage": True,
-        "target_kl": None}
+        "target_kl": None, "smdp": False}
     """Settings added since runs were first written, as those runs had them: a run folder whose
     ``config.json`` lacks one was trained so."""
 
@@ -133,8 +138,6 @@ CONFIG_SHAPE: Shape = {name: typing.get_args(hint) or hint for name, hint in
                       typing.get_type_hints(RLConfig).items()
                       if name not in RLConfig.RESUMABLE and name != "LEGACY"}
 """``config.json``: :meth:`RLConfig.identity`, every field of its type."""
-STATE_SHAPE: Shape = {"timesteps": int, "env_steps": int, "episodes": int, "resumes": int}
-"""``state.json``: what has been trained so far."""
 
 
 def check_values(cfg: RLConfig) -> None:
@@ -260,11 +263,14 @@ def new_model(cfg: RLConfig, vec: Any, seed: int, device: str = "cpu") -> Any:
     gives the same initial policy)."""
     from sb3_contrib import MaskablePPO
 
+    from sc2data.rl.smdp import SMDPRolloutBuffer
+
     return MaskablePPO(
         policy_class(cfg), vec, n_steps=cfg.rollout, batch_size=cfg.batch_size,
         n_epochs=cfg.epochs, learning_rate=3e-4, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda,
         ent_coef=cfg.ent_coef, normalize_advantage=cfg.normalize_advantage,
         target_kl=cfg.target_kl, seed=seed, device=device, verbose=0,
+        rollout_buffer_class=SMDPRolloutBuffer if cfg.smdp else None,
         policy_kwargs=policy_kwargs(cfg))
 
 
@@ -300,17 +306,11 @@ def policy_kwargs(cfg: RLConfig) -> dict[str, Any]:
 
 def _read_json(path: Path, shape: Shape) -> dict[str, Any]:
     """A run record, checked to have ``shape``."""
-    remedy = f"delete {path.parent} and train it again, or pick another --out"
-    try:
-        record = loads(path.read_bytes())
-    except (OSError, ValueError) as e:
-        raise Sc2DataError(f"cannot read {path}: {e}; {remedy}") from None
-    check_record(record, shape, path, remedy)
-    return record
+    return runs.read_record(path, shape, path.parent)
 
 
 def _write_json(path: Path, data: Any) -> None:
-    write_atomic(path, (json.dumps(data, indent=1, sort_keys=True) + "\n").encode())
+    runs.write_record(path, data)
 
 
 def read_config(run: Path) -> dict[str, Any]:
@@ -329,43 +329,52 @@ def read_config(run: Path) -> dict[str, Any]:
     return record  # type: ignore[no-any-return]
 
 
-def read_curve(run: Path) -> list[dict[str, float]]:
-    """The learning curve rows of a run (an empty list before the first episode ends)."""
-    path = run / "curve.csv"
-    if not path.is_file():
-        return []
-    with path.open(newline="") as f:
-        return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(f)]
-
-
-def _write_curve(run: Path, rows: Sequence[dict[str, float]], cfg: RLConfig) -> None:
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=CURVE_FIELDS, lineterminator="\n")
-    w.writeheader()
-    for r in rows:
-        w.writerow({k: (int(r[k]) if float(r[k]).is_integer() else r[k]) for k in CURVE_FIELDS})
-    write_atomic(run / "curve.csv", buf.getvalue().encode())
-    _write_json(run / "curve.json", {"config": cfg.identity(), "episodes": list(rows)})
+read_curve = runs.read_curve
 
 
 def train(cfg: RLConfig) -> Path:
-    """Train (or resume) a MaskablePPO agent; returns the run folder."""
+    """Train (or resume) a MaskablePPO agent; returns the run folder (:mod:`sc2data.rl.runs`
+    says what it holds and how a checkpoint is committed)."""
     require_rl("sc2data rl train")
     narration, scorer = check_config(cfg)
     run = Path(cfg.out)
+    check_out(run)
+    if run.exists() and not run.is_dir():
+        raise Sc2DataError(f"cannot write {run}: it is a file; choose another --out")
+    if run.is_dir() and any(run.iterdir()) and not (run / runs.CONFIG).is_file():
+        raise Sc2DataError(f"{run} exists and is not an sc2data rl run; pick another --out")
+    made = not run.exists()
+    run.mkdir(parents=True, exist_ok=True)
+    try:
+        with FolderLock(run, "rl train"), writing(f"the run {run}", "free some space, then "
+                                                  "rerun the same command to resume"):
+            return _train_locked(cfg, run, narration, scorer)
+    except BaseException:
+        if made and run.is_dir() and not any(p.name != ".lock" for p in run.iterdir()):
+            shutil.rmtree(run, ignore_errors=True)  # a run that failed its checks leaves nothing
+        raise
+
+
+def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path:
+    runs.recover(run)
+    identity = {**cfg.identity(), "inputs": runs.input_digests(narration, cfg.mem)}
     state: dict[str, Any] = {"timesteps": 0, "env_steps": 0, "episodes": 0, "resumes": 0}
-    if (run / "config.json").is_file():
+    if (run / runs.CONFIG).is_file():
         old = read_config(run)
+        old_inputs = old.pop("inputs", None)
         if old != cfg.identity():
             diff = sorted(k for k in set(old) | set(cfg.identity())
                           if old.get(k) != cfg.identity().get(k))
             raise Sc2DataError(f"{run} holds a run with other settings ({', '.join(diff)}); "
                                f"rerun with the same options to resume, or pick another --out")
-        if (run / "state.json").is_file() and (run / "model.zip").is_file():
-            state = _read_json(run / "state.json", STATE_SHAPE)
-            state["resumes"] += 1
-    elif run.exists() and any(run.iterdir()):
-        raise Sc2DataError(f"{run} exists and is not an sc2data rl run; pick another --out")
+        if old_inputs is not None and old_inputs != identity["inputs"]:
+            what = sorted(k.replace("_sha256", "") for k in set(old_inputs) | set(
+                identity["inputs"]) if old_inputs.get(k) != identity["inputs"].get(k))
+            raise Sc2DataError(f"{run} was trained with another {' and '.join(what)} (the file "
+                               f"at that path changed); restore it, or pick another --out")
+        previous = runs.read_state(run)
+        if previous is not None:
+            state = {**previous, "resumes": previous["resumes"] + 1}
     if state["timesteps"] >= cfg.steps:
         print(f"{run} is already trained for {state['timesteps']} steps (--steps {cfg.steps})")
         return run
@@ -373,6 +382,7 @@ def train(cfg: RLConfig) -> Path:
     import torch
     from sb3_contrib import MaskablePPO
     from stable_baselines3.common.callbacks import BaseCallback
+    from stable_baselines3.common.logger import configure
 
     from sc2data.progress import bar
 
@@ -380,20 +390,27 @@ def train(cfg: RLConfig) -> Path:
     # policy; PPO's update while the workers wait), so the learner may use every core.
     torch.set_num_threads(cfg.threads or cores())
     device = resolve_device(cfg.device)
-    run.mkdir(parents=True, exist_ok=True)
-    _write_json(run / "config.json", cfg.identity())
-    rows = [r for r in read_curve(run) if r["timesteps"] <= state["timesteps"]]
+    _write_json(run / runs.CONFIG, identity)
+    rows = [r for r in runs.read_curve(run) if r["timesteps"] <= state["timesteps"]]
     seed = cfg.seed + 1000 * state["resumes"]
+    formats = ["csv"] + (["tensorboard"] if cfg.tensorboard else [])
+    if cfg.tensorboard:
+        try:
+            import tensorboard  # noqa: F401
+        except ImportError:
+            raise MissingDependencyError("tensorboard", "rl", "--tensorboard") from None
     vec = make_vec_env(cfg, scorer, narration)
     try:
         if state["timesteps"]:
-            model = MaskablePPO.load(run / "model.zip", env=vec, device=device)
+            model = MaskablePPO.load(run / runs.MODEL, env=vec, device=device)
             model.set_random_seed(seed)
         else:
             model = new_model(cfg, vec, seed, device)
+        model.set_logger(configure(str(run / runs.LOGS / str(state["resumes"])), formats))
 
         class Curve(BaseCallback):
-            """Episode rows, the progress bar and periodic checkpoints."""
+            """Episode rows, SMDP step counts, the game's score in SB3's log, the progress
+            bar and periodic checkpoints."""
 
             def __init__(self, progress: Any) -> None:
                 super().__init__()
@@ -402,22 +419,27 @@ def train(cfg: RLConfig) -> Path:
                 self.ret = np.zeros(cfg.envs)
                 self.next_save = state["timesteps"] + cfg.checkpoint_every
                 self.last = state["timesteps"]
+                self.finished: list[float] = []
 
             def _on_step(self) -> bool:
                 infos, dones = self.locals["infos"], self.locals["dones"]
                 rewards = self.locals["rewards"]
+                buffer = self.model.rollout_buffer
+                if hasattr(buffer, "record_steps"):  # SMDPRolloutBuffer  # before SB3 adds this step
+                    buffer.record_steps([int(i.get("env_steps", 1)) for i in infos])
                 for i, info in enumerate(infos):
                     state["env_steps"] += int(info.get("env_steps", 1))
                     self.game[i] += float(info.get("game_reward", rewards[i]))
                     self.ret[i] += float(rewards[i])
                     if dones[i]:
                         state["episodes"] += 1
+                        marines = int(info.get("marines", self.game[i]))
                         rows.append({"episode": state["episodes"], "env": i,
                                      "timesteps": self.num_timesteps,
-                                     "env_steps": state["env_steps"],
-                                     "marines": int(info.get("marines", self.game[i])),
+                                     "env_steps": state["env_steps"], "marines": marines,
                                      "game_return": round(self.game[i], 6),
                                      "return": round(self.ret[i], 6)})
+                        self.finished.append(marines)
                         self.game[i] = self.ret[i] = 0.0
                 self.bar.update(self.num_timesteps - self.last)
                 self.last = self.num_timesteps
@@ -426,13 +448,17 @@ def train(cfg: RLConfig) -> Path:
                     self.next_save = self.num_timesteps + cfg.checkpoint_every
                 return True
 
+            def _on_rollout_end(self) -> None:
+                self.logger.record("game/pysc2_steps", state["env_steps"])
+                self.logger.record("game/episodes", state["episodes"])
+                if self.finished:
+                    self.logger.record("game/marines_mean", float(np.mean(self.finished)))
+                    self.finished = []
+
             def save(self) -> None:
                 state["timesteps"] = self.num_timesteps
-                _write_curve(run, rows, cfg)
-                partial = run / "model.partial.zip"
-                model.save(partial)
-                partial.replace(run / "model.zip")
-                _write_json(run / "state.json", state)
+                runs.commit(run, model, rows, {"config": cfg.identity(), "episodes": list(rows)},
+                            state)
 
         with bar(cfg.steps, desc="rl train", unit="step", show=cfg.progress) as progress:
             progress.update(state["timesteps"])
@@ -443,6 +469,20 @@ def train(cfg: RLConfig) -> Path:
     finally:
         vec.close()
     return run
+
+
+def summary_line(run: Path, seconds: float | None = None) -> str:
+    """One line on a trained run: decisions, pysc2 steps, episodes and the last episodes'
+    marines (the game's score)."""
+    state = runs.read_state(run) or {"timesteps": 0, "env_steps": 0, "episodes": 0}
+    rows = runs.read_curve(run)
+    last = [r["marines"] for r in rows[-10:]]
+    score = (f"; last {len(last)} training episodes: {np.mean(last):.1f} marines on average"
+             if last else "; no episode finished yet")
+    speed = f"; {state['timesteps'] / seconds:,.0f} decisions/s this session" \
+        if seconds and state["timesteps"] else ""
+    return (f"trained {run}: {state['timesteps']:,} decisions, {state['env_steps']:,} pysc2 "
+            f"steps, {state['episodes']} episodes{score}{speed}")
 
 
 def load_config(run: Path) -> RLConfig:
@@ -468,7 +508,7 @@ def evaluate(run: Path, episodes: int = 10, deterministic: bool = True,
     if episodes < 1:
         raise Sc2DataError("--episodes must be at least 1")
     cfg = load_config(run)
-    state = _read_json(run / "state.json", STATE_SHAPE) if (run / "state.json").is_file() else {}
+    state = runs.read_state(run) or {}
     import torch
     from sb3_contrib import MaskablePPO
 

@@ -1,0 +1,177 @@
+"""An RL run folder: its files named once, its records checked, and a checkpoint that is whole.
+
+``sc2data rl train --out RUN`` writes:
+
+* ``config.json`` — the settings (:class:`~sc2data.rl.train.RLConfig`) and, under ``inputs``,
+  the sha256 of what the reward reads: the narration's commands and the MEM's checkpoint. A
+  resume with other settings, an edited narration or another MEM at the same path is refused.
+* ``model.zip`` (sb3-contrib's format), ``curve.csv`` / ``curve.json`` (one row per finished
+  training episode) and ``state.json`` (decisions, pysc2 steps, episodes, resumes, and the
+  sha256 of the model and of the curve) — one checkpoint, committed as a whole:
+  the model and curve are written as ``*.partial`` files, then ``state.partial.json`` naming
+  their sha256, then each is renamed into place, ``state.json`` last. A stop anywhere leaves either
+  the previous checkpoint or the new one (:func:`recover` finishes or discards a commit it finds
+  half done), so a resume never pairs a model with another checkpoint's count or curve.
+* ``logs/<resume>/progress.csv`` (and TensorBoard events with ``--tensorboard``): SB3's logger,
+  PPO's own figures per update (losses, entropy, approximate KL, clip fraction, explained
+  variance) beside the game's score, one folder per training session.
+
+Every file is checked by content where it is read: a model, curve or state that is not the one
+the last checkpoint recorded is a one-line error, never trained on, evaluated or plotted.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from sc2data.errors import Sc2DataError
+from sc2data.files import sha256_file, write_atomic
+
+__all__ = ["sha256_file"]
+from sc2data.formats import Shape, check_record, loads
+
+CONFIG = "config.json"
+MODEL = "model.zip"
+STATE = "state.json"
+CURVE_CSV = "curve.csv"
+CURVE_JSON = "curve.json"
+LOGS = "logs"
+MODEL_PARTIAL = "model.partial.zip"
+CURVE_PARTIAL = "curve.partial.csv"
+STATE_PARTIAL = "state.partial.json"
+
+CURVE_FIELDS: tuple[str, ...] = ("episode", "env", "timesteps", "env_steps", "marines",
+                                 "game_return", "return")
+STATE_SHAPE: Shape = {"timesteps": int, "env_steps": int, "episodes": int, "resumes": int,
+                      "model_sha256?": str, "curve_sha256?": str}
+"""``state.json``: what has been trained so far, and the checkpoint's files by content (runs
+written before the sha256 were recorded lack them and are read without that check)."""
+
+
+def remedy(run: Path) -> str:
+    return f"delete {run} and train it again, or pick another --out"
+
+
+def read_record(path: Path, shape: Shape, run: Path) -> dict[str, Any]:
+    """A run record, parsed (any depth, one line) and checked to have ``shape``."""
+    try:
+        record = loads(path.read_bytes())
+    except (OSError, ValueError) as e:
+        raise Sc2DataError(f"cannot read {path}: {e}; {remedy(run)}") from None
+    check_record(record, shape, path, remedy(run))
+    return record  # type: ignore[no-any-return]
+
+
+def write_record(path: Path, data: Any) -> None:
+    write_atomic(path, (json.dumps(data, indent=1, sort_keys=True) + "\n").encode())
+
+
+def curve_bytes(rows: Sequence[dict[str, float]]) -> bytes:
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=CURVE_FIELDS, lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: (int(r[k]) if float(r[k]).is_integer() else r[k]) for k in CURVE_FIELDS})
+    return buf.getvalue().encode()
+
+
+def _sha(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def recover(run: Path) -> None:
+    """Finish a checkpoint whose commit a stop interrupted, or discard it: afterwards the run
+    holds one whole checkpoint (or none) and no partial file."""
+    partial = run / STATE_PARTIAL
+    if partial.is_file():
+        try:
+            record = loads(partial.read_bytes())
+            want = {MODEL: record["model_sha256"], CURVE_CSV: record["curve_sha256"]}
+        except (OSError, ValueError, KeyError, TypeError):
+            want = {}
+        moves = {MODEL: MODEL_PARTIAL, CURVE_CSV: CURVE_PARTIAL}
+        whole = bool(want)
+        for final, sha in want.items():
+            staged = run / moves[final]
+            if staged.is_file() and sha256_file(staged) == sha:
+                staged.replace(run / final)
+            whole = whole and (run / final).is_file() and sha256_file(run / final) == sha
+        if whole:
+            partial.replace(run / STATE)
+    for name in (STATE_PARTIAL, MODEL_PARTIAL, CURVE_PARTIAL):
+        (run / name).unlink(missing_ok=True)
+
+
+def read_state(run: Path) -> dict[str, Any] | None:
+    """The last checkpoint's record (None before the first), its model and curve checked."""
+    if not (run / STATE).is_file():
+        if (run / MODEL).is_file():
+            raise Sc2DataError(f"{run} holds {MODEL} but no {STATE} (what it was trained "
+                               f"for); {remedy(run)}")
+        return None
+    state = read_record(run / STATE, STATE_SHAPE, run)
+    check_model(run, state)
+    if "curve_sha256" in state:
+        path = run / CURVE_CSV
+        if not path.is_file() or sha256_file(path) != state["curve_sha256"]:
+            raise Sc2DataError(f"{path} is not the curve {STATE} records (changed or damaged "
+                               f"since training wrote it); {remedy(run)}")
+    return state
+
+
+def check_model(run: Path, state: dict[str, Any]) -> None:
+    """One line unless ``model.zip`` is the model ``state`` records."""
+    path = run / MODEL
+    if not path.is_file():
+        raise Sc2DataError(f"{run} has no {MODEL}; {remedy(run)}")
+    if "model_sha256" in state and sha256_file(path) != state["model_sha256"]:
+        raise Sc2DataError(f"{path} is not the model {STATE} records (another run's, or "
+                           f"damaged); {remedy(run)}")
+
+
+def commit(run: Path, model: Any, rows: Sequence[dict[str, float]], curve_json: Any,
+           state: dict[str, Any]) -> None:
+    """Write a checkpoint as a whole (see the module docstring); ``state`` gains the sha256."""
+    model.save(run / MODEL_PARTIAL)
+    curve = curve_bytes(rows)
+    write_atomic(run / CURVE_PARTIAL, curve)
+    state.update(model_sha256=sha256_file(run / MODEL_PARTIAL), curve_sha256=_sha(curve))
+    write_record(run / STATE_PARTIAL, state)
+    write_record(run / CURVE_JSON, curve_json)  # derived from the same rows, for readers
+    recover(run)
+
+
+def read_curve(run: Path) -> list[dict[str, float]]:
+    """The learning curve rows of a run (an empty list before the first episode ends); one
+    line if ``curve.csv`` is not what the last checkpoint recorded or cannot be read."""
+    path = run / CURVE_CSV
+    if not path.is_file():
+        return []
+    read_state(run)  # the curve is checked against the checkpoint that recorded it
+    try:
+        with path.open(newline="") as f:
+            rows = [{k: float(v) for k, v in row.items()} for row in csv.DictReader(f)]
+    except (OSError, ValueError, TypeError, csv.Error) as e:
+        raise Sc2DataError(f"cannot read {path}: {e}; {remedy(run)}") from None
+    if rows and set(rows[0]) != set(CURVE_FIELDS):
+        raise Sc2DataError(f"{path} does not hold the fields {', '.join(CURVE_FIELDS)}; "
+                           f"{remedy(run)}")
+    return rows
+
+
+def input_digests(narration: Any, mem: str | None) -> dict[str, str]:
+    """What the reward reads, by content: the narration's commands, the MEM's checkpoint."""
+    out: dict[str, str] = {}
+    if narration is not None:
+        out["narration_sha256"] = _sha("\n".join(narration.commands).encode())
+    if mem is not None:
+        path = Path(mem)
+        ckpt = path / "best.pt" if path.is_dir() else path
+        out["mem_sha256"] = sha256_file(ckpt)
+    return out

@@ -1,0 +1,154 @@
+"""An RL run is a folder like the others: locked while written, its inputs and files checked by
+content, a checkpoint committed whole, SB3's logs written."""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from sc2data.files import FolderLock
+from sc2data.rl import runs
+from tests.cli import assert_one_line_error, run_cli
+from tests.mem_helpers import tiny_pairset, train_tiny
+
+TINY = ["--steps", "64", "--envs", "2", "--rollout", "16", "--batch-size", "32",
+        "--episode-steps", "20", "--checkpoint-every", "32", "--no-progress"]
+
+
+@pytest.fixture(scope="module")
+def mem_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("mem")
+    return train_tiny(tiny_pairset(root / "pairs"), root / "run", epochs=1)
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    run = tmp_path_factory.mktemp("rl") / "run"
+    code = _cli(["rl", "train", "--out", run, *TINY])
+    assert code == 0
+    return run
+
+
+def _cli(argv: list[object]) -> int:
+    from tests.cli import exit_code
+
+    return exit_code(*argv)
+
+
+def _copy(run: Path, to: Path) -> Path:
+    shutil.copytree(run, to)
+    return to
+
+
+def test_a_run_writes_logs_a_summary_and_a_checked_checkpoint(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    run = tmp_path / "run"
+    code, out, err = run_cli(["rl", "train", "--out", run, *TINY], capsys)
+    assert code == 0, err
+    assert out.startswith(f"trained {run}: 64 decisions") and "marines on average" in out
+    state = json.loads((run / runs.STATE).read_text())
+    assert len(state["model_sha256"]) == 64 and len(state["curve_sha256"]) == 64
+    with (run / runs.LOGS / "0" / "progress.csv").open() as f:
+        header = next(csv.reader(f))
+    for column in ("train/approx_kl", "train/entropy_loss", "train/clip_fraction",
+                   "train/explained_variance", "train/value_loss", "game/marines_mean"):
+        assert column in header
+    assert not list(run.glob("*.partial*"))
+
+
+def test_two_trainings_into_one_folder_cannot_both_write(
+        trained: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    run = _copy(trained, tmp_path / "run")
+    with FolderLock(run, "rl train"):
+        code, _, err = run_cli(["rl", "train", "--out", run, *TINY, "--steps", "96"], capsys)
+    assert_one_line_error(code, err, "another sc2data rl train is writing", str(run))
+
+
+@pytest.mark.parametrize("damage, needles", [
+    ("model", ("model.zip", "not the model")),
+    ("curve", ("curve.csv", "not the curve")),
+    ("state", ("no state.json",)),
+])
+def test_files_not_of_the_last_checkpoint_are_refused(
+        trained: Path, tmp_path: Path, damage: str, needles: tuple[str, ...],
+        capsys: pytest.CaptureFixture[str]) -> None:
+    run = _copy(trained, tmp_path / "run")
+    if damage == "model":
+        data = bytearray((run / runs.MODEL).read_bytes())
+        data[len(data) // 2] ^= 1
+        (run / runs.MODEL).write_bytes(bytes(data))
+    elif damage == "curve":
+        with (run / runs.CURVE_CSV).open("a") as f:
+            f.write("99,0,1,1,500,500,500\n")
+    else:
+        (run / runs.STATE).unlink()
+    for argv in (["rl", "train", "--out", run, *TINY, "--steps", "96"],
+                 ["rl", "evaluate", run, "--episodes", "1", "--no-progress"],
+                 ["rl", "plot", run, "--out", tmp_path / "c.png"]):
+        if damage == "model" and argv[1] == "plot":
+            continue  # a plot reads the curve, not the model
+        code, _, err = run_cli(argv, capsys)
+        assert_one_line_error(code, err, *needles)
+    assert not (tmp_path / "c.png").exists()
+
+
+def test_an_edited_narration_or_another_mem_is_refused_on_resume(
+        mem_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    narration = tmp_path / "narration.txt"
+    narration.write_text("build a supply depot\nbuild a barracks\n")
+    args = ["--reward", "narration", "--mem", mem_run, "--narration", narration,
+            "--threshold", "2", "--action-space", "paper", *TINY]
+    run = tmp_path / "run"
+    code, _, err = run_cli(["rl", "train", "--out", run, *args], capsys)
+    assert code == 0, err
+    narration.write_text("build a barracks\nbuild a supply depot\n")
+    code, _, err = run_cli(["rl", "train", "--out", run, *args, "--steps", "96"], capsys)
+    assert_one_line_error(code, err, "another narration", "changed")
+    narration.write_text("build a supply depot\nbuild a barracks\n")
+    code, _, err = run_cli(["rl", "train", "--out", run, *args, "--steps", "96"], capsys)
+    assert code == 0, err
+
+
+@pytest.mark.parametrize("stop_after", ["model", "curve", "state-partial", "model-renamed"])
+def test_a_commit_stopped_anywhere_leaves_one_whole_checkpoint(
+        trained: Path, tmp_path: Path, stop_after: str) -> None:
+    """The steps of ``runs.commit`` done by hand up to a stop; :func:`runs.recover` then leaves
+    the old checkpoint or the new one, its files agreeing with its state."""
+    from sb3_contrib import MaskablePPO
+
+    run = _copy(trained, tmp_path / "run")
+    old = json.loads((run / runs.STATE).read_text())
+    model = MaskablePPO.load(run / runs.MODEL, device="cpu")
+    model.policy.action_net.bias.data += 1.0  # a different model
+    rows = runs.read_curve(run) + [{"episode": 99, "env": 0, "timesteps": 128, "env_steps": 128,
+                                    "marines": 3, "game_return": 3, "return": 3}]
+    model.save(run / runs.MODEL_PARTIAL)
+    if stop_after != "model":
+        (run / runs.CURVE_PARTIAL).write_bytes(runs.curve_bytes(rows))
+    if stop_after in ("state-partial", "model-renamed"):
+        new = {**old, "timesteps": 128, "model_sha256": runs.sha256_file(run / runs.MODEL_PARTIAL),
+               "curve_sha256": runs.sha256_file(run / runs.CURVE_PARTIAL)}
+        runs.write_record(run / runs.STATE_PARTIAL, new)
+    if stop_after == "model-renamed":
+        (run / runs.MODEL_PARTIAL).replace(run / runs.MODEL)
+    runs.recover(run)
+    state = runs.read_state(run)  # raises unless model, curve and state agree
+    assert state is not None
+    assert state["timesteps"] == (128 if stop_after in ("state-partial", "model-renamed")
+                                  else old["timesteps"])
+    assert not list(run.glob("*.partial*"))
+
+
+@pytest.mark.parametrize("out", ["file", "under-file"])
+def test_an_out_that_is_or_lies_under_a_file_is_one_line(
+        tmp_path: Path, out: str, capsys: pytest.CaptureFixture[str]) -> None:
+    f = tmp_path / "f"
+    f.write_text("x")
+    target = f if out == "file" else f / "run"
+    code, _, err = run_cli(["rl", "train", "--out", target, *TINY], capsys)
+    assert_one_line_error(code, err, "file")
+    assert f.read_text() == "x"

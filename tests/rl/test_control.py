@@ -146,3 +146,38 @@ def test_the_spatial_policy_plays_masked_calls_only(tmp_path: Path) -> None:
             assert not any(i["invalid"] for i in infos)
     finally:
         vec.close()
+
+
+def test_smdp_advantages_discount_each_decision_by_its_steps() -> None:
+    """k = 1 everywhere: SB3's own GAE; k > 1: γ^k by hand."""
+    from gymnasium import spaces
+    from sb3_contrib.common.maskable.buffers import MaskableDictRolloutBuffer
+
+    from sc2data.rl.smdp import SMDPRolloutBuffer
+
+    obs = spaces.Dict({"v": spaces.Box(0, 1, (1,))})
+    act = spaces.Discrete(2)
+    rewards, values = [1.0, 0.0, 2.0], [0.5, 0.2, 0.1]
+    bufs = []
+    for cls in (SMDPRolloutBuffer, MaskableDictRolloutBuffer):
+        b = cls(3, obs, act, gamma=0.9, gae_lambda=0.8, n_envs=1)
+        for t in range(3):
+            if isinstance(b, SMDPRolloutBuffer):
+                b.record_steps([1])
+            b.add({"v": np.zeros((1, 1))}, np.zeros((1, 1)), np.array([rewards[t]]),
+                  np.array([t == 0]), torch.tensor([values[t]]), torch.zeros(1),
+                  action_masks=np.ones((1, 2)))
+        b.compute_returns_and_advantage(torch.tensor([0.3]), np.array([False]))
+        bufs.append(b)
+    assert np.allclose(bufs[0].advantages, bufs[1].advantages)
+
+    b = SMDPRolloutBuffer(2, obs, act, gamma=0.9, gae_lambda=0.8, n_envs=1)
+    for t, k in enumerate((5, 2)):
+        b.record_steps([k])
+        b.add({"v": np.zeros((1, 1))}, np.zeros((1, 1)), np.array([rewards[t]]),
+              np.array([t == 0]), torch.tensor([values[t]]), torch.zeros(1),
+              action_masks=np.ones((1, 2)))
+    b.compute_returns_and_advantage(torch.tensor([0.3]), np.array([False]))
+    d1 = rewards[1] + 0.9 ** 2 * 0.3 - values[1]
+    d0 = rewards[0] + 0.9 ** 5 * values[1] - values[0]
+    assert np.allclose(b.advantages[:, 0], [d0 + 0.9 ** 5 * 0.8 * d1, d1])

@@ -1,8 +1,8 @@
 """The narration-guided RL experiment: action spaces × rewards × seeds, one step budget per space.
 
-Each run is ``sc2data rl train`` (one env, one torch thread, so ``--jobs 2`` fills two cores),
-then ``sc2data rl evaluate`` on seeded episodes training never used, deterministic and
-sampled. Everything is resumable: rerunning the same command resumes unfinished training runs
+Each run is ``sc2data rl train`` (its defaults: 16 games in worker processes, the learner on
+every core, so one job at a time fills the machine; ``--jobs`` runs several), then ``sc2data rl
+evaluate`` on seeded episodes training never used, deterministic and sampled. Everything is resumable: rerunning the same command resumes unfinished training runs
 (``rl train`` resumes itself) and skips evaluations already written for the trained step count.
 Narration runs wait until the MEM run (``--mem``) has finished training. Prints and writes
 ``OUT/summary.md`` (the table of BENCHMARKS.md) and one learning-curve PNG per action space.
@@ -73,7 +73,7 @@ def one_run(out: Path, space: str, reward: str, seed: int, steps: int, a: argpar
     times_file = out / space / f"{name}.times.json"
     times: dict[str, float] = _read(times_file) or {}
     args = ["rl", "train", "--action-space", space, "--reward", reward, "--steps", str(steps),
-            "--envs", "1", "--seed", str(seed), "--out", str(run), "--no-progress"]
+            "--seed", str(seed), "--out", str(run), "--no-progress"]
     if reward == "narration":
         with mem_lock:
             wait_for_mem(a.mem)
@@ -143,7 +143,7 @@ def main() -> None:
                     help="SPACE=DECISIONS per run, one per action space to run.")
     ap.add_argument("--rewards", nargs="*", default=list(REWARDS), choices=REWARDS)
     ap.add_argument("--seeds", nargs="*", type=int, default=[0, 1, 2])
-    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--eval-episodes", nargs="*", default=["macro=5", "paper=2"],
                     help="SPACE=EPISODES of each evaluation (deterministic, then sampled).")
     ap.add_argument("--paraphrased", type=Path, help="Also one narration run (seed 0) per action "

@@ -22,7 +22,8 @@ def train_cmd(
     action_space: str = typer.Option("macro", "--action-space",
                                      help="macro (6 macro actions) or paper (pysc2 function + "
                                           "screen point)."),
-    reward: str = typer.Option("sparse", "--reward", help="sparse, rules or narration."),
+    reward: str = typer.Option("sparse", "--reward", help="sparse, rules, narration or zero (a "
+                                                          "control: no reward)."),
     narration: Optional[Path] = typer.Option(
         None, "--narration", help="Narration file (TOML or one command per line) [default: the "
                                   "shipped BuildMarines narration]."),
@@ -57,6 +58,23 @@ def train_cmd(
     threads: Optional[int] = typer.Option(
         None, "--threads", help="Torch threads of the learner (policy, MEM, updates) [one per "
                                 "core]."),
+    policy: str = typer.Option("auto", "--policy", help="spatial (paper space: the point given "
+                                                        "the function), independent (SB3's "
+                                                        "heads) or auto."),
+    gamma: float = typer.Option(0.99, "--gamma", help="PPO discount (per pysc2 step with "
+                                                      "--smdp)."),
+    gae_lambda: float = typer.Option(0.95, "--gae-lambda", help="GAE lambda."),
+    epochs: int = typer.Option(4, "--epochs", help="PPO epochs over each rollout."),
+    ent_coef: float = typer.Option(0.01, "--ent-coef", help="Entropy bonus coefficient."),
+    target_kl: Optional[float] = typer.Option(
+        0.05, "--target-kl", help="Stop an update's epochs once the policy moved this far "
+                                  "(0: never)."),
+    normalize_advantage: bool = typer.Option(
+        False, "--normalize-advantage/--raw-advantage",
+        help="Normalise advantages per minibatch (SB3's default; off: a zero-reward control "
+             "then stays where it started)."),
+    smdp: bool = typer.Option(True, "--smdp/--no-smdp",
+                              help="Discount a decision of k pysc2 steps by gamma^k."),
     tensorboard: bool = typer.Option(False, "--tensorboard",
                                      help="Also write SB3's log as TensorBoard events "
                                           "(RUN/logs/<session>/; needs tensorboard)."),
@@ -78,7 +96,9 @@ def train_cmd(
                    episode_steps=episode_steps, rollout=rollout, batch_size=batch_size,
                    checkpoint_every=checkpoint_every, obs=obs, obs_size=obs_size,
                    minimap=minimap, processes=processes, device=device, threads=threads,
-                   tensorboard=tensorboard,
+                   tensorboard=tensorboard, policy=policy, gamma=gamma, gae_lambda=gae_lambda,
+                   epochs=epochs, ent_coef=ent_coef, target_kl=target_kl or None,
+                   normalize_advantage=normalize_advantage, smdp=smdp,
                    progress=progress)
     start = time.perf_counter()
     run = train(cfg)

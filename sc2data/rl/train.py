@@ -23,6 +23,7 @@ from __future__ import annotations
 import dataclasses
 import io
 import json
+import math
 import os
 import shutil
 import typing
@@ -159,6 +160,15 @@ def check_values(cfg: RLConfig) -> None:
             raise Sc2DataError(f"--{name.replace('_', '-')} must be at least 1")
     if cfg.episode_steps is not None and cfg.episode_steps < 1:
         raise Sc2DataError("--episode-steps must be at least 1")
+    if cfg.bonus is not None and not math.isfinite(cfg.bonus):
+        raise Sc2DataError(f"--bonus must be a finite number, got {cfg.bonus}")
+    if not (math.isfinite(cfg.threshold) and cfg.threshold > 0):
+        raise Sc2DataError(f"--threshold must be a positive finite distance, got {cfg.threshold}")
+    if cfg.patience < 0:
+        raise Sc2DataError("--patience must be 0 or more")
+    if cfg.normalize_advantage and min(cfg.batch_size, cfg.rollout * cfg.envs) < 2:
+        raise Sc2DataError("--normalize-advantage needs minibatches of at least 2 samples "
+                           "(--batch-size, and --rollout × --envs)")
     if not 0 <= cfg.seed < EVAL_SEED - 100_000:
         raise Sc2DataError(f"--seed must lie in [0, {EVAL_SEED - 100_000})")
     if cfg.processes is not None and cfg.processes < 0:
@@ -344,15 +354,28 @@ def train(cfg: RLConfig) -> Path:
     if run.is_dir() and any(run.iterdir()) and not (run / runs.CONFIG).is_file():
         raise Sc2DataError(f"{run} exists and is not an sc2data rl run; pick another --out")
     made = not run.exists()
+    begun = (run / runs.STATE).is_file()
     run.mkdir(parents=True, exist_ok=True)
     try:
         with FolderLock(run, "rl train"), writing(f"the run {run}", "free some space, then "
                                                   "rerun the same command to resume"):
             return _train_locked(cfg, run, narration, scorer)
     except BaseException:
-        if made and run.is_dir() and not any(p.name != ".lock" for p in run.iterdir()):
-            shutil.rmtree(run, ignore_errors=True)  # a run that failed its checks leaves nothing
+        if not begun and not (run / runs.STATE).is_file():
+            _forget(run, whole=made)  # no checkpoint yet: the rerun starts it afresh
         raise
+
+
+def _forget(run: Path, whole: bool) -> None:
+    """Remove what a run that never reached its first checkpoint wrote (so a corrected command
+    is not refused as "other settings"); the folder too if this command made it."""
+    if whole:
+        shutil.rmtree(run, ignore_errors=True)
+        return
+    for name in (runs.CONFIG, runs.CURVE_CSV, runs.CURVE_JSON, runs.MODEL_PARTIAL,
+                 runs.CURVE_PARTIAL, runs.STATE_PARTIAL):
+        (run / name).unlink(missing_ok=True)
+    shutil.rmtree(run / runs.LOGS, ignore_errors=True)
 
 
 def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path:

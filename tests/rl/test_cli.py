@@ -95,6 +95,12 @@ def test_narration_training_with_a_tiny_mem(mem_run: Path, tmp_path: Path,
     (["--processes", "-1"], ("--processes",)),
     (["--threads", "0"], ("--threads",)),
     (["--device", "tpu"], ("unknown device", "cuda")),
+    (["--reward", "rules", "--bonus", "nan"], ("--bonus", "finite")),
+    (["--reward", "rules", "--bonus", "inf"], ("--bonus", "finite")),
+    (["--threshold", "nan"], ("--threshold",)),
+    (["--threshold", "0"], ("--threshold",)),
+    (["--normalize-advantage", "--batch-size", "1"], ("--normalize-advantage",)),
+    (["--patience", "-1"], ("--patience",)),
     (["--mem", "x"], ("--reward narration",)),
 ])
 def test_bad_input_is_one_line_and_writes_nothing(

@@ -152,3 +152,22 @@ def test_an_out_that_is_or_lies_under_a_file_is_one_line(
     code, _, err = run_cli(["rl", "train", "--out", target, *TINY], capsys)
     assert_one_line_error(code, err, "file")
     assert f.read_text() == "x"
+
+
+def test_a_run_that_fails_before_its_first_checkpoint_leaves_nothing(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """Not even the config.json that would refuse the corrected command as other settings."""
+    import sc2data.rl.train as rl_train
+
+    def broken(*args: object, **kwargs: object) -> None:
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(rl_train, "make_vec_env", broken)
+    run = tmp_path / "run"
+    code, _, err = run_cli(["rl", "train", "--out", run, *TINY], capsys)
+    assert_one_line_error(code, err, "No space left", "free some space")
+    assert not run.exists()
+    monkeypatch.undo()
+    code, _, err = run_cli(["rl", "train", "--out", run, *TINY, "--seed", "5"], capsys)
+    assert code == 0, err

@@ -147,3 +147,40 @@ def test_ctrl_c_inside_code_compiled_from_a_string(tmp_path: Path) -> None:
     (tmp_path / "inside_a_string.py").write_text(INSIDE_A_STRING)
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(ROOT)])}
     _ended_interrupted(_start([], module="inside_a_string", env=env))  # it sends its own
+
+
+RL_TRAIN = ["rl", "train", "--envs", "2", "--processes", "2", "--steps", "256", "--rollout", "32",
+            "--batch-size", "32", "--episode-steps", "30", "--checkpoint-every", "64",
+            "--no-progress"]
+
+
+def _children(pid: int) -> list[int]:
+    try:
+        return [int(p) for p in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]
+    except OSError:
+        return []
+
+
+@pytest.mark.parametrize("moment", ["import", "workers", "training"])
+def test_ctrl_c_to_rl_train_and_its_workers(tmp_path: Path, moment: str) -> None:
+    """Ctrl-C from a terminal reaches the learner and its worker processes alike (the whole
+    process group): one line, exit 130, no worker traceback, no worker left; the rerun
+    finishes the run."""
+    out = tmp_path / "run"
+    proc = _start([*RL_TRAIN, "--out", out])
+    if moment == "import":
+        _wait_until(proc, _mapped(proc.pid, "_multiarray_umath"), "numpy import")
+    elif moment == "workers":
+        _wait_until(proc, lambda: len(_children(proc.pid)) >= 2, "worker processes")
+    else:
+        _wait_until(proc, lambda: (out / "state.json").is_file(), "a first checkpoint")
+    workers = _children(proc.pid)
+    os.killpg(proc.pid, signal.SIGINT)
+    _ended_interrupted(proc)
+    deadline = time.monotonic() + 15
+    while any(Path(f"/proc/{w}").exists() and "Z" not in
+              Path(f"/proc/{w}/stat").read_text().split()[2] for w in workers):
+        assert time.monotonic() < deadline, "a worker outlived its learner"
+        time.sleep(0.05)
+    assert exit_code(*RL_TRAIN, "--out", out) == 0
+    assert (out / "state.json").is_file()

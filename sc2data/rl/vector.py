@@ -26,7 +26,6 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import signal
-import threading
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
@@ -211,6 +210,8 @@ def _serve(conn: Connection, cfg: GameConfig, lo: int, hi: int, path: str,
            fields: list[Field]) -> None:
     """A worker process: games ``lo`` to ``hi`` over the arena at ``path``, one pipe message
     per vector step; errors go back as one line. It ends when the learner closes the pipe."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the learner handles Ctrl-C and stops us
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
     games = None
     try:
         arena = Arena.attach(path, fields)
@@ -298,10 +299,11 @@ class BuildMarinesVecEnv(VecEnv):
     def _start(self, cfg: GameConfig, n: int, fields: list[Field]) -> None:
         ctx = mp.get_context("spawn")
         bounds = np.linspace(0, n, self.processes + 1).round().astype(int)
-        main = threading.current_thread() is threading.main_thread()
-        # Workers ignore Ctrl-C from their first instruction (the disposition survives exec, and
-        # Python keeps an ignored SIGINT): the learner stops them, so no worker traceback.
-        old = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+        # Ctrl-C must reach the learner (which stops the workers) and never a worker (a
+        # traceback each): the workers start with SIGINT blocked, a mask that survives exec,
+        # and ignore it before unblocking (_serve). The learner's own mask is restored at
+        # once, so a Ctrl-C that came meanwhile is delivered to it then.
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
         try:
             for lo, hi in zip(bounds[:-1], bounds[1:]):
                 mine, theirs = ctx.Pipe()
@@ -312,8 +314,7 @@ class BuildMarinesVecEnv(VecEnv):
                 self._conns.append(mine)
                 self._procs.append(p)
         finally:
-            if main:
-                signal.signal(signal.SIGINT, old)
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
         self._collect()
 
     def _send(self, cmd: str, args: Sequence[Any] | None = None) -> None:

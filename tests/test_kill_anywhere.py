@@ -169,3 +169,33 @@ def test_train_stopped_anywhere_finishes_to_the_same_model(
     done = subprocess.run(_sc2data("verify", tmp_path / "run"), cwd=ROOT, capture_output=True,
                           text=True)
     assert done.returncode == 0, done.stderr
+
+
+RL = ["rl", "train", "--steps", "192", "--rollout", "32", "--batch-size", "32",
+      "--episode-steps", "25", "--checkpoint-every", "64"]
+
+
+@pytest.mark.parametrize("envs", [1, 2])
+def test_rl_train_stopped_anywhere_resumes_to_a_run_that_agrees_with_itself(
+        tmp_path: Path, envs: int) -> None:
+    """An RL run cannot equal an uninterrupted one (a resume seeds its games anew), but after a
+    stop anywhere and the rerun, its model, curve and state agree with each other (the sha256
+    the last checkpoint recorded) and with its settings, it trained for its --steps, and it
+    evaluates."""
+    from sc2data.rl import runs
+
+    ref = tmp_path / "ref"
+    args = [*RL, "--envs", envs, "--processes", envs]
+    duration = _run(_cli(*args, "--out", ref))
+    out = tmp_path / "run"
+    _stopped_then_finished(_cli(*args, "--out", out), duration, random.Random(f"rl {envs} {SEED}"))
+    state = runs.read_state(out)  # raises unless model.zip and curve.csv are the recorded ones
+    assert state is not None and state["timesteps"] >= 192
+    rows = runs.read_curve(out)
+    assert all(r["timesteps"] <= state["timesteps"] for r in rows)
+    assert len(rows) == state["episodes"] and [r["episode"] for r in rows] == list(
+        range(1, len(rows) + 1))
+    assert not list(out.glob("*.partial*"))
+    done = subprocess.run(_sc2data("rl", "evaluate", out, "--episodes", "1", "--no-progress"),
+                          cwd=ROOT, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr

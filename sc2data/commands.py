@@ -223,9 +223,9 @@ def render(
                                        "the agent [default: 0]."),
     steps: Optional[int] = typer.Option(None, "--steps", help="Live: agent steps to play before "
                                         "the frame [default: 300]."),
-    agent: Optional[str] = typer.Option(None, "--agent", help="Live: reduced-random, random or "
-                                        "scripted [default: reduced-random, as sc2data "
-                                        "rollout]."),
+    agent: Optional[str] = typer.Option(None, "--agent", help="Live: reduced-random, random, "
+                                        "scripted or policy:RUN (a trained sc2data rl run) "
+                                        "[default: reduced-random, as sc2data rollout]."),
 ) -> None:
     """Draw feature layers as PNGs, coloured as pysc2 does, each categorical layer's ids in a
     legend with pysc2's names and an all-zero layer marked "empty".
@@ -285,8 +285,9 @@ def rollout(
                                                 "with more --episodes to grow it)."),
     env: Optional[str] = typer.Option(None, help="Backend: sim (the embedded simulator) or sc2 "
                                                  "(the real game) [default: sim]."),
-    agent: Optional[str] = typer.Option(None, help="Agent: reduced-random, random or scripted "
-                                                   "[default: reduced-random]."),
+    agent: Optional[str] = typer.Option(None, help="Agent: reduced-random, random, scripted or "
+                                                   "policy:RUN (a trained sc2data rl run's "
+                                                   "policy, sampled) [default: reduced-random]."),
     episodes: Optional[int] = typer.Option(None, help="Episodes to play [default: 1]."),
     seed: Optional[int] = typer.Option(None, help="Root seed; episode e is seeded from (seed, e) "
                                                   "[default: 0]."),

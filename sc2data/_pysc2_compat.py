@@ -15,16 +15,15 @@ imports it, sc2data's own modules or the user's ``from pysc2.lib import features
 
 from __future__ import annotations
 
-import importlib.abc
 import importlib.machinery
 import os
-import random
 import sys
 from collections.abc import Callable, MutableSequence, Sequence
 from types import ModuleType
 from typing import Any
 
-_shuffle = random.shuffle
+_shuffle: Callable[..., None] | None = None
+"""Python's own ``random.shuffle``, kept while the compatible one is in place."""
 _depth = 0
 """pysc2 modules executing now (one imports another): the compatible shuffle is in place while
 it is above zero."""
@@ -33,6 +32,7 @@ it is above zero."""
 def _shuffle_compat(x: MutableSequence[Any], random_fn: Callable[[], float] | None = None) -> None:
     """``random.shuffle`` accepting pysc2's removed ``random`` argument (Fisher-Yates with it)."""
     if random_fn is None:
+        assert _shuffle is not None
         _shuffle(x)
         return
     for i in reversed(range(1, len(x))):
@@ -40,10 +40,10 @@ def _shuffle_compat(x: MutableSequence[Any], random_fn: Callable[[], float] | No
         x[i], x[j] = x[j], x[i]
 
 
-class _PatchedLoader(importlib.abc.Loader):
+class _PatchedLoader:
     """Runs a pysc2 module with the old ``random.shuffle`` signature accepted."""
 
-    def __init__(self, loader: importlib.abc.Loader) -> None:
+    def __init__(self, loader: Any) -> None:
         self._loader = loader
 
     def __getattr__(self, name: str) -> Any:
@@ -54,18 +54,22 @@ class _PatchedLoader(importlib.abc.Loader):
         return self._loader.create_module(spec)
 
     def exec_module(self, module: ModuleType) -> None:
-        global _depth
+        global _depth, _shuffle
+        import random  # here, not at import sc2data: only pysc2's import needs it
+
+        if not _depth:
+            _shuffle = random.shuffle
+            random.shuffle = _shuffle_compat  # type: ignore[assignment]
         _depth += 1
-        random.shuffle = _shuffle_compat  # type: ignore[assignment]
         try:
             self._loader.exec_module(module)
         finally:
             _depth -= 1
             if not _depth:
-                random.shuffle = _shuffle
+                random.shuffle = _shuffle  # type: ignore[assignment]
 
 
-class _Finder(importlib.abc.MetaPathFinder):
+class _Finder:
     """Steps in for pysc2's modules only (protobuf's implementation before the first, the
     shuffle while each executes); every other import passes by untouched."""
 

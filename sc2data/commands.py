@@ -215,7 +215,7 @@ def render(
     limit: Optional[int] = typer.Option(None, "--limit", help="With --rule: how many stacks, "
                                         "spread evenly over those it fired on [default: 8]."),
     out: Optional[Path] = typer.Option(None, "--out", help="PNG file to write; with --rule, a "
-                                       "folder for the PNGs [default with DATA: "
+                                       "folder for the PNGs [default: with DATA, "
                                        "./<DATA name>-e<E>-s<S>.png or ./<DATA name>-<RULE>/]."),
     env: Optional[str] = typer.Option(None, "--env", help="Live: sim (the embedded simulator) or "
                                       "sc2 (the real game) [default: sim]."),

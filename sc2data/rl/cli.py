@@ -33,11 +33,11 @@ def train_cmd(
                                                "and reward call per step)."),
     processes: Optional[int] = typer.Option(
         None, "--processes", help="Worker processes stepping the games (0: in this process) "
-                                  "[one per core; none for one env]."),
+                                  "[default: one per core; none for one env]."),
     seed: int = typer.Option(0, "--seed", help="Seed of the policy and the environments."),
     bonus: Optional[float] = typer.Option(
-        None, "--bonus", help="Shaping bonus: per rule firing (rules) [0.1] or per matched "
-                              "command (narration) [1.0]."),
+        None, "--bonus", help="Shaping bonus: per rule firing (rules) or per matched "
+                              "command (narration) [default: 0.1 rules, 1.0 narration]."),
     threshold: float = typer.Option(0.5, "--threshold",
                                     help="MEM distance below which a command is matched."),
     patience: int = typer.Option(0, "--patience", help="Skip a narration command not matched "
@@ -47,7 +47,8 @@ def train_cmd(
                                      "or match) or potential (gamma*phi(s') - phi(s): cannot be "
                                      "farmed)."),
     episode_steps: Optional[int] = typer.Option(
-        None, "--episode-steps", help="pysc2 steps per episode on the simulator [1800]."),
+        None, "--episode-steps", help="pysc2 steps per episode on the simulator "
+                                      "[default: 1800]."),
     rollout: int = typer.Option(64, "--rollout", help="PPO rollout length per env."),
     batch_size: int = typer.Option(256, "--batch-size", help="PPO minibatch size."),
     checkpoint_every: int = typer.Option(2048, "--checkpoint-every",
@@ -59,8 +60,8 @@ def train_cmd(
     minimap: bool = typer.Option(False, "--minimap/--no-minimap",
                                  help="compact: add the minimap's channels."),
     threads: Optional[int] = typer.Option(
-        None, "--threads", help="Torch threads of the learner (policy, MEM, updates) [one per "
-                                "core]."),
+        None, "--threads", help="Torch threads of the learner (policy, MEM, updates) [default: "
+                                "one per core]."),
     device: str = typer.Option("auto", "--device", help="Policy and MEM on cpu, cuda or auto "
                                                         "(cuda where a GPU is present)."),
     progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",
@@ -104,7 +105,8 @@ def baselines_cmd(
     episodes: int = typer.Option(10, "--episodes", help="The evaluation episodes to play (the "
                                                         "same seeds as rl evaluate)."),
     episode_steps: Optional[int] = typer.Option(
-        None, "--episode-steps", help="pysc2 steps per episode, as the runs were trained [1800]."),
+        None, "--episode-steps", help="pysc2 steps per episode, as the runs were trained "
+                                      "[default: 1800]."),
     progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",
                                             help="Progress bar [default: on a terminal]."),
 ) -> None:
@@ -139,12 +141,12 @@ def plot_cmd(
 def compare_cmd(
     runs: list[Path] = typer.Argument(..., help="Run folders (evaluated: sc2data rl evaluate)."),
     out: Optional[Path] = typer.Option(None, "--out", help="Folder for compare.json and "
-                                                           "compare.png [print only]."),
+                                                           "compare.png [default: print only]."),
     baselines: Optional[Path] = typer.Option(
         None, "--baselines", help="Folder of sc2data rl baselines: reference agents beside."),
     against: Optional[str] = typer.Option(
         None, "--against", help="Probability of improvement of every group over this one "
-                                "[every pair]."),
+                                "[default: every pair]."),
     reps: int = typer.Option(2000, "--reps", help="Bootstrap resamples."),
     points: int = typer.Option(20, "--points", help="Points of the sample-efficiency curves."),
     window: int = typer.Option(10, "--window", help="Training episodes per curve point."),
@@ -168,9 +170,10 @@ def agreement_cmd(
     episodes: int = typer.Option(3, "--episodes", help="Seeded episodes to play."),
     deterministic: bool = typer.Option(False, "--deterministic",
                                        help="Play the most likely action instead of sampling."),
-    threshold: Optional[float] = typer.Option(None, "--threshold",
-                                              help="MEM match threshold [the model's: 0.5]."),
-    out: Optional[Path] = typer.Option(None, "--out", help="JSON file [RUN/agreement.json]."),
+    threshold: Optional[float] = typer.Option(
+        None, "--threshold", help="MEM match threshold [default: the model's, 0.5]."),
+    out: Optional[Path] = typer.Option(None, "--out",
+                                       help="JSON file [default: RUN/agreement.json]."),
 ) -> None:
     """On the states a trained policy visits: per command, how often the MEM's match agrees
     with the labelling rule (precision, recall and F1, the rule as ground truth); and the

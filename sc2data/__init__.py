@@ -7,14 +7,21 @@ The public API, all loaded on first use so that ``import sc2data`` itself import
 * ``make_agent(name, seed=…)`` — a pysc2 ``BaseAgent`` (``random``, ``reduced-random``, ``scripted``);
 * ``Stacker(schema)`` — live observations into two-frame stacks;
 * ``open_dataset(DIR)`` / ``Dataset`` — the stacks of a rollout folder;
-* ``load_model(RUN)`` — a trained MEM as a batched reward signal;
+* ``load_model(RUN)`` — a trained MEM as a batched reward signal (one torch thread a call by
+  default: ``threads=``);
 * ``Schema``, ``StackBatch`` — the state schema and a batch of stacks.
+
+It also installs the import hook that makes pysc2 4.0.0 importable on Python 3.11
+(:mod:`sc2data._pysc2_compat`), so ``from pysc2.lib import features`` works after it, in your code
+as in ours.
 """
 
 from __future__ import annotations
 
 import importlib
 from typing import TYPE_CHECKING, Any
+
+from sc2data._pysc2_compat import install as _install_pysc2_fix
 
 if TYPE_CHECKING:
     from sc2data.data.dataset import Dataset, open_dataset
@@ -35,6 +42,8 @@ _WHERE = {
     "Stacker": "sc2data.stacker",
 }
 """Each public name and the module it lives in."""
+
+_install_pysc2_fix()
 
 __all__ = sorted(_WHERE)
 

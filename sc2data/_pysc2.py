@@ -1,14 +1,8 @@
-"""Import pysc2 4.0.0 on Python 3.11 with no manual step.
+"""pysc2 for sc2data's modules: every one imports pysc2 through this one.
 
-Two known breakages of the last released pysc2 (4.0.0) on Python 3.11 are handled here, once, and every other
-module imports pysc2 through this one:
-
-* ``s2clientprotocol`` ships old generated protobuf code. We pin ``protobuf<3.21``; if another
-  package forced a newer protobuf, the pure-Python implementation still loads the old code, so we
-  select it before protobuf is first imported.
-* ``pysc2/lib/colors.py`` calls ``random.shuffle(x, fn)``; the second argument was removed in 3.11.
-  We accept and ignore it for the duration of the first import (pysc2 seeds that shuffle with a
-  constant, so its palettes stay deterministic either way).
+pysc2 4.0.0's two breakages on Python 3.11 are fixed by the import hook of
+:mod:`sc2data._pysc2_compat` (which ``import sc2data`` installs too, so that a user's own
+``from pysc2.lib import features`` works after it); this module makes sure it is installed first.
 
 ``sc2_env`` (the real game's environment) is imported on first use: through its human renderer
 it imports scikit-video and SciPy, 1.8 of the 2.2 s that importing pysc2 took (``python -X
@@ -18,38 +12,15 @@ interface format and its dimensions are ``features``' own classes, which ``sc2_e
 
 from __future__ import annotations
 
-import os
-import random
-import sys
-from collections.abc import Callable, MutableSequence
 from typing import Any
 
+from sc2data._pysc2_compat import install
 from sc2data.vocab import MINIMAP_SIZE, SCREEN_SIZE
 
-os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
-if "google.protobuf" not in sys.modules:
-    os.environ.setdefault("PROTOCOL_BUFFERS_PYTHON_IMPLEMENTATION", "python")
-
-_shuffle = random.shuffle
-
-
-def _shuffle_compat(x: MutableSequence[Any], random_fn: Callable[[], float] | None = None) -> None:
-    """``random.shuffle`` accepting pysc2's removed ``random`` argument (Fisher-Yates with it)."""
-    if random_fn is None:
-        _shuffle(x)
-        return
-    for i in reversed(range(1, len(x))):
-        j = int(random_fn() * (i + 1))
-        x[i], x[j] = x[j], x[i]
-
-
-random.shuffle = _shuffle_compat  # type: ignore[assignment]
-try:
-    from pysc2.agents import base_agent  # noqa: E402
-    from pysc2.env import environment  # noqa: E402
-    from pysc2.lib import actions, buffs, colors, features, point, units  # noqa: E402
-finally:
-    random.shuffle = _shuffle
+install()
+from pysc2.agents import base_agent  # noqa: E402
+from pysc2.env import environment  # noqa: E402
+from pysc2.lib import actions, buffs, colors, features, point, units  # noqa: E402
 
 __all__ = ["actions", "base_agent", "buffs", "colors", "environment", "features",
            "interface_format", "point", "sc2_env", "units"]

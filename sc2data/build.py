@@ -26,6 +26,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from sc2data.cliopts import plural
 from sc2data.errors import Sc2DataError, reason
 from sc2data.files import LOCK, FolderLock, check_out
 from sc2data.recipe import MAX_EPISODES, Recipe
@@ -99,10 +100,10 @@ def build(recipe: Recipe, out: str | os.PathLike[str], *, workers: int = 1,
         raise Sc2DataError(f"cannot create {out}: {reason(e)}; choose another --out") \
             from None
     try:
-        with FolderLock(out, "build"):
+        with FolderLock(out, "build", remove=True):
             return _stages(recipe, config, out, data, report, workers, progress, ray, rules_dir)
     finally:
-        if made and [p.name for p in out.iterdir()] == [LOCK]:  # failed before writing anything
+        if made and [p.name for p in out.iterdir()] in ([LOCK], []):  # failed before any write
             shutil.rmtree(out, ignore_errors=True)
 
 
@@ -169,8 +170,9 @@ def _data(recipe: Recipe, config: RolloutConfig, data: Path, report: BuildReport
             report.lines += retries.lines() if retries.tasks else []
         report.add("rollout", t)
         grew = f", grown from {r.grew_from}" if r.grew_from is not None else ""
-        report.lines.append(f"rollout: {r.episodes} episodes{grew}, {r.steps:,} stacks "
-                            f"({r.shards_written} shards written, {r.shards_kept} kept)")
+        report.lines.append(f"rollout: {plural(r.episodes, 'episode')}{grew}, "
+                            f"{plural(r.steps, 'stack')} ({plural(r.shards_written, 'shard')} "
+                            f"written, {r.shards_kept} kept)")
 
         t = time.perf_counter()
         if ray is None:

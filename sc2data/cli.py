@@ -100,10 +100,11 @@ def _run(argv: list[str]) -> int:
     """Run one command line; its exit status, every message printed."""
     import typer
 
+    from sc2data.cliopts import one_voice
     from sc2data.commands import app
     from sc2data.errors import Sc2DataError
 
-    command = typer.main.get_command(app)
+    command = one_voice(typer.main.get_command(app))
     try:
         rc = command.main(args=_bare_ray(argv), prog_name="sc2data", standalone_mode=False)
         # Non-standalone click returns typer.Exit(code) instead of raising it; typer turns a

@@ -18,6 +18,7 @@ import types
 import typing
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Optional, TypeVar
 
 import typer
@@ -88,12 +89,15 @@ def _cli_type(annotation: Any) -> Any:
     return annotation
 
 
-def config_options(cls: type, *, arguments: Mapping[str, str] = {},
-                   skip: tuple[str, ...] = (), flags: Mapping[str, str] = {}) -> OptionGroup:
+def config_options(cls: type, *, arguments: Mapping[str, tuple[str, str]] = {},
+                   skip: tuple[str, ...] = (), flags: Mapping[str, str] = {},
+                   metavars: Mapping[str, str] = {}) -> OptionGroup:
     """One option per init field of dataclass ``cls`` (``--batch-size`` for ``batch_size``),
     typed and defaulted as the field is, its docstring as help; ``arguments`` names fields taken
-    as positional arguments (with their help), ``flags`` gives a field its own option spelling
-    (``"--progress/--no-progress"``). The command receives a ``cls`` instance as ``config``."""
+    as positional arguments (their metavar, ``PAIRS``, and help), ``flags`` gives a field its own
+    option spelling (``"--progress/--no-progress"``), ``metavars`` names what a field's value is
+    where its type does not say (``PATH`` for a path kept as a string). The command receives a
+    ``cls`` instance as ``config``."""
     hints = typing.get_type_hints(cls)
     docs = field_docs(cls)
     params = []
@@ -101,10 +105,71 @@ def config_options(cls: type, *, arguments: Mapping[str, str] = {},
         if not f.init or f.name in skip:
             continue
         if f.name in arguments:
-            default: Any = typer.Argument(..., metavar=f.name.upper(), help=arguments[f.name])
+            metavar, help_text = arguments[f.name]
+            default: Any = typer.Argument(..., metavar=metavar, help=help_text)
         else:
             value = f.default if f.default is not dataclasses.MISSING else ...
             decls = [flags[f.name]] if f.name in flags else []
-            default = typer.Option(value, *decls, help=docs.get(f.name, ""))
+            default = typer.Option(value, *decls, help=docs.get(f.name, ""),
+                                   metavar=metavars.get(f.name))
         params.append(option(f.name, _cli_type(hints[f.name]), default))
     return OptionGroup("config", tuple(params), lambda values: cls(**values))
+
+
+def plural(n: int, word: str) -> str:
+    """``1 episode``, ``2 episodes``, ``1,800 stacks``: a count and its noun, agreed."""
+    return f"{n:,} {word}{'' if n == 1 else 's'}"
+
+
+def _usage_name(self: Any) -> str:
+    """A positional argument in the usage line as click writes it: ``DATA``, ``[DATA]``,
+    ``RUN...`` (typer's own wraps a required one in braces, ``{DATA}``)."""
+    name = self.metavar or self.name.upper()
+    if not self.required and not name.startswith("["):
+        name = f"[{name}]"
+    return name + ("..." if self.nargs != 1 and not name.endswith("...") else "")
+
+
+_WORDS = {int: "N", float: "NUMBER", str: "TEXT"}
+"""An option's value type in the one word help shows for it."""
+
+
+def _type_metavar(param: Any) -> str | None:
+    """What an option's value is, in one uppercase word (``PATH``, ``N``, ``TEXT``), for an
+    option that names none itself; None for a flag or a choice (help lists its values)."""
+    desc = param.type_descriptor
+    if param.is_flag or param.count or desc.is_choice:
+        return None
+    if desc.is_path:
+        return "PATH"
+    annotation = desc.annotation
+    if desc.is_list:
+        (annotation,) = typing.get_args(annotation) or (str,)
+    if annotation is Path or (isinstance(annotation, type) and issubclass(annotation, Path)):
+        return "PATH"
+    return _WORDS.get(annotation, "TEXT")
+
+
+def one_voice(command: Any) -> Any:
+    """Give every command under ``command`` (typer's click command) one way of writing what it
+    takes: an option's value as an uppercase word (``--out PATH``, ``--episodes N``) unless it
+    names its own, a positional argument by its name in capitals (``RUN``, ``DATA``) as click
+    writes them, ``RUN...`` for several. Returns ``command``."""
+    from typer.core import TyperArgument
+
+    class Argument(TyperArgument):
+        _usage_display_name = _usage_name
+
+        def display_type_rich(self, ctx: Any) -> str | None:
+            return None  # its name says what it takes (``DATA``), not ``<path>``
+
+    for param in command.params:
+        if isinstance(param, TyperArgument):
+            if param.metavar is None and param.name:
+                param.metavar = param.name.upper() + ("..." if param.nargs != 1 else "")
+            param.__class__ = Argument
+        elif getattr(param, "metavar", "") is None and hasattr(param, "type_descriptor"):
+            param.metavar = _type_metavar(param)
+    for sub in getattr(command, "commands", {}).values():
+        one_voice(sub)
+    return command

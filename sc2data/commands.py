@@ -13,15 +13,31 @@ from typing import TYPE_CHECKING, Optional
 if TYPE_CHECKING:
     from sc2data.scaleout.driver import RayOptions
 
+import click
 import typer
+from typer.core import TyperGroup
 
-from sc2data.cliopts import OptionGroup, config_options, option, with_options
+from sc2data.cliopts import OptionGroup, config_options, option, plural, with_options
 from sc2data.errors import Sc2DataError
 from sc2data.model.train import TrainConfig
 from sc2data.rl.cli import app as rl_app
 
+PIPELINE = ("rollout", "label", "pair", "build", "train", "evaluate", "tsne", "rl", "export",
+            "info", "verify", "render", "rules", "version")
+"""The commands in the order ``sc2data --help`` lists them: the pipeline's, then the tools."""
+
+
+class _PipelineOrder(TyperGroup):
+    """Lists the commands in :data:`PIPELINE` order, not alphabetically nor as defined."""
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        names = super().list_commands(ctx)
+        return sorted(names, key=lambda n: PIPELINE.index(n) if n in PIPELINE else len(PIPELINE))
+
+
 app = typer.Typer(
     name="sc2data",
+    cls=_PipelineOrder,
     help="Natural-language commands grounded in StarCraft II BuildMarines game states.",
     no_args_is_help=True,
     add_completion=False,
@@ -29,29 +45,48 @@ app = typer.Typer(
     rich_markup_mode=None,
 )
 
+_MORE_VERSIONS = ("torch", "stable-baselines3", "sb3-contrib", "gymnasium", "minari", "datasets")
+"""Packages whose versions ``sc2data version`` adds to those the data records."""
+
+
+def version_lines() -> list[str]:
+    """sc2data's version, then those of the packages its data records and of the optional ones
+    that train and export it ("not installed" where absent); reads package metadata only."""
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as package_version
+
+    from sc2data.provenance import versions
+
+    found = dict(versions())
+    for dist in _MORE_VERSIONS:
+        try:
+            found[dist] = package_version(dist)
+        except PackageNotFoundError:
+            found[dist] = "not installed"
+    return [f"{name} {v}" for name, v in found.items()]
+
 
 def _print_version(value: bool) -> None:
     if value:
-        from importlib.metadata import version as package_version
-
-        typer.echo(f"sc2data {package_version('sc2data')}")
+        for line in version_lines():
+            typer.echo(line)
         raise typer.Exit()
 
 
 @app.callback()
 def _root(show_version: bool = typer.Option(False, "--version", is_eager=True,
                                             callback=_print_version,
-                                            help="Print sc2data's version and exit.")) -> None:
+                                            help="Print what sc2data version prints and exit.")
+          ) -> None:
     """Natural-language commands grounded in StarCraft II BuildMarines game states."""
 
 
 @app.command()
 def version() -> None:
-    """Print the versions of sc2data and the packages its data records."""
-    from sc2data.provenance import versions
-
-    for name, v in versions().items():
-        typer.echo(f"{name} {v}")
+    """The versions of sc2data, of the packages its data records and of the optional ones (torch,
+    SB3, gymnasium, Minari, datasets); the same as sc2data --version."""
+    for line in version_lines():
+        typer.echo(line)
 
 
 rules_app = typer.Typer(help="Labelling rules: built-in, from plugins and from --rules-dir.",
@@ -112,7 +147,8 @@ PROGRESS = OptionGroup("progress", (
 
 @rules_app.command("list")
 def rules_list(
-    rules_dir: Optional[Path] = typer.Option(None, "--rules-dir", help=_RULES_DIR_HELP),
+    rules_dir: Optional[Path] = typer.Option(None, "--rules-dir", metavar="DIR",
+                                             help=_RULES_DIR_HELP),
 ) -> None:
     """List every rule found, validated: id, version, command text and where it comes from."""
     from sc2data.labels.registry import format_rules, load_registry
@@ -123,12 +159,14 @@ def rules_list(
 @app.command()
 @with_options(PROGRESS, RAY)
 def label(
-    data: Path = typer.Argument(..., help="Dataset folder (from sc2data rollout)."),
-    rules: Optional[str] = typer.Option(None, "--rules", help="Comma-separated rule ids to use "
-                                        "(default: all)."),
-    exclude: Optional[str] = typer.Option(None, "--exclude", help="Comma-separated rule ids to "
-                                          "leave out."),
-    rules_dir: Optional[Path] = typer.Option(None, "--rules-dir", help=_RULES_DIR_HELP),
+    data: Path = typer.Argument(..., metavar="DATA", help="Dataset folder (sc2data rollout "
+                                                          "--out)."),
+    rules: Optional[str] = typer.Option(None, "--rules", metavar="IDS",
+                                        help="Comma-separated rule ids to use [default: all]."),
+    exclude: Optional[str] = typer.Option(None, "--exclude", metavar="IDS",
+                                          help="Comma-separated rule ids to leave out."),
+    rules_dir: Optional[Path] = typer.Option(None, "--rules-dir", metavar="DIR",
+                                             help=_RULES_DIR_HELP),
     batch_size: int = typer.Option(256, "--batch-size", help="Stacks per rule call."),
     overwrite: bool = typer.Option(False, help="Replace labels made with another set of rules."),
     workers: int = typer.Option(1, "--workers", help="Processes labelling shards at once "
@@ -137,9 +175,11 @@ def label(
     ray: Optional[RayArgs] = None,
 ) -> None:
     """Label every stack of DATA with the rules; writes labels.parquet and stack_labels.parquet."""
+    from sc2data.folders import expect_dataset
     from sc2data.labels.label import label_dataset
     from sc2data.labels.registry import parse_ids
 
+    expect_dataset(data)
     selection = {"include": parse_ids(rules), "exclude": parse_ids(exclude) or [],
                  "rules_dir": rules_dir, "batch_size": batch_size, "progress": progress,
                  "overwrite": overwrite}
@@ -161,28 +201,31 @@ def label(
 
 @app.command()
 def render(
-    data: Optional[Path] = typer.Argument(None, help="Dataset folder (sc2data rollout --out, or a "
+    data: Optional[Path] = typer.Argument(None, metavar="[DATA]",
+                                          help="Dataset folder (sc2data rollout --out, or a "
                                           "build's OUT/rollout) to draw stored stacks of; "
                                           "without it, a live frame."),
     episode: Optional[int] = typer.Option(None, "--episode", help="With DATA: the stack's "
                                           "episode."),
     step: Optional[int] = typer.Option(None, "--step", help="With DATA: the stack's step in that "
                                        "episode (frames STEP and STEP+1)."),
-    rule: Optional[str] = typer.Option(None, "--rule", help="With DATA: draw stacks this rule "
-                                       "fired on (needs sc2data label DATA)."),
+    rule: Optional[str] = typer.Option(None, "--rule", metavar="ID",
+                                       help="With DATA: draw stacks this rule fired on (needs "
+                                       "sc2data label DATA)."),
     limit: Optional[int] = typer.Option(None, "--limit", help="With --rule: how many stacks, "
                                         "spread evenly over those it fired on [default: 8]."),
-    out: Optional[str] = typer.Option(None, "--out", help="PNG file to write; with --rule, a "
-                                      "folder for the PNGs [default with DATA: "
-                                      "./<DATA name>-e<E>-s<S>.png or ./<DATA name>-<RULE>/]."),
-    env: Optional[str] = typer.Option(None, "--env", help="Live: sim (embedded, default) or sc2 "
-                                      "(real game)."),
+    out: Optional[Path] = typer.Option(None, "--out", help="PNG file to write; with --rule, a "
+                                       "folder for the PNGs [default: with DATA, "
+                                       "./<DATA name>-e<E>-s<S>.png or ./<DATA name>-<RULE>/]."),
+    env: Optional[str] = typer.Option(None, "--env", help="Live: sim (the embedded simulator) or "
+                                      "sc2 (the real game) [default: sim]."),
     seed: Optional[int] = typer.Option(None, "--seed", help="Live: seed for the environment and "
                                        "the agent [default: 0]."),
     steps: Optional[int] = typer.Option(None, "--steps", help="Live: agent steps to play before "
                                         "the frame [default: 300]."),
-    agent: Optional[str] = typer.Option(None, "--agent", help="Live: random, reduced-random or "
-                                        "scripted (default)."),
+    agent: Optional[str] = typer.Option(None, "--agent", help="Live: reduced-random, random, "
+                                        "scripted or policy:RUN (a trained sc2data rl run) "
+                                        "[default: reduced-random, as sc2data rollout]."),
 ) -> None:
     """Draw feature layers as PNGs, coloured as pysc2 does, each categorical layer's ids in a
     legend with pysc2's names and an all-zero layer marked "empty".
@@ -198,6 +241,10 @@ def render(
     e<E>-s<S>.png; page through them to see what the rule takes for its command.
     """
     live = {"env": env, "seed": seed, "steps": steps, "agent": agent}
+    if data is not None:
+        from sc2data.folders import expect_dataset
+
+        expect_dataset(data)
     stored = {"episode": episode, "step": step, "rule": rule, "limit": limit}
     wrong = [k for k, v in (stored if data is None else live).items() if v is not None]
     if wrong:
@@ -208,7 +255,9 @@ def render(
         if out is None:
             raise Sc2DataError("a live render needs --out PNG")
         from sc2data.game.render import render_episode
+        from sc2data.recipe import RolloutSpec
 
+        live["agent"] = agent or RolloutSpec.agent  # one default agent: rollout's
         paths = [render_episode(out, **{k: v for k, v in live.items() if v is not None})]
     elif rule is not None:
         if episode is not None or step is not None:
@@ -216,7 +265,7 @@ def render(
                                "and --step")
         from sc2data.labels.view import DEFAULT_LIMIT, render_rule
 
-        paths = render_rule(data, rule, out or f"{data.name}-{rule}",
+        paths = render_rule(data, rule, out or Path(f"{data.name}-{rule}"),
                             DEFAULT_LIMIT if limit is None else limit)
     elif episode is None or step is None or limit is not None:
         raise Sc2DataError("with DATA, give --episode E --step S, or --rule RULE [--limit N]")
@@ -224,7 +273,7 @@ def render(
         from sc2data.labels.view import render_stored
 
         paths = [render_stored(data, episode, step,
-                               out or f"{data.name}-e{episode}-s{step}.png")]
+                               out or Path(f"{data.name}-e{episode}-s{step}.png"))]
     for path in paths:
         typer.echo(f"wrote {path}")
 
@@ -234,23 +283,26 @@ def render(
 def rollout(
     out: Path = typer.Option(..., "--out", help="Dataset folder (created; rerun to resume, or "
                                                 "with more --episodes to grow it)."),
-    env: Optional[str] = typer.Option(None, help="Backend: sim (embedded simulator, default) or "
-                                                 "sc2 (the real game)."),
-    agent: Optional[str] = typer.Option(None, help="Agent: reduced-random (default), random or "
-                                                   "scripted."),
+    env: Optional[str] = typer.Option(None, help="Backend: sim (the embedded simulator) or sc2 "
+                                                 "(the real game) [default: sim]."),
+    agent: Optional[str] = typer.Option(None, help="Agent: reduced-random, random, scripted or "
+                                                   "policy:RUN (a trained sc2data rl run's "
+                                                   "policy, sampled) [default: reduced-random]."),
     episodes: Optional[int] = typer.Option(None, help="Episodes to play [default: 1]."),
     seed: Optional[int] = typer.Option(None, help="Root seed; episode e is seeded from (seed, e) "
                                                   "[default: 0]."),
-    layers: Optional[str] = typer.Option(None, help="Layer set: paper (13+7, default) or full "
-                                                    "(27+11)."),
-    recipe: Optional[Path] = typer.Option(None, help="Take the settings above from a recipe "
-                                                     "(manifests/*.toml)."),
+    layers: Optional[str] = typer.Option(None, help="Layer set: paper (13+7) or full (27+11) "
+                                                    "[default: paper]."),
+    recipe: Optional[Path] = typer.Option(None, metavar="RECIPE",
+                                          help="Take the settings above from a recipe "
+                                               "(manifests/*.toml)."),
     workers: Optional[int] = typer.Option(None, help="Worker processes [default: 1]; with --ray, "
                                                      "tasks at once [default: all CPUs]. The "
                                                      "data does not depend on it."),
     episodes_per_shard: Optional[int] = typer.Option(None, help="Episodes per shard file "
                                                                 "[default: 8]."),
-    max_steps: Optional[int] = typer.Option(None, help="Cut episodes after this many steps."),
+    max_steps: Optional[int] = typer.Option(None, help="Cut episodes after this many steps "
+                                                       "[default: play them to the end]."),
     progress: Optional[bool] = None,
     ray: Optional[RayArgs] = None,
 ) -> None:
@@ -288,8 +340,9 @@ def rollout(
     else:
         s = run(config, out, workers=1 if workers is None else workers, progress=progress)
     grew = f", grown from {s.grew_from}" if s.grew_from is not None else ""
-    typer.echo(f"{s.out}: {s.episodes} episodes{grew}, {s.steps:,} stacks in {s.seconds:.1f} s "
-               f"({s.shards_written} shards written, {s.shards_kept} kept)")
+    typer.echo(f"{s.out}: {plural(s.episodes, 'episode')}{grew}, {plural(s.steps, 'stack')} in "
+               f"{s.seconds:.1f} s ({plural(s.shards_written, 'shard')} written, "
+               f"{s.shards_kept} kept)")
     for line in lines:
         typer.echo(line)
 
@@ -297,18 +350,22 @@ def rollout(
 @app.command()
 @with_options(PROGRESS)
 def pair(
-    recipe: Path = typer.Argument(..., help="Recipe (manifests/*.toml)."),
-    data: Path = typer.Option(..., "--data", help="Labelled dataset folder (sc2data rollout, "
-                                                  "then sc2data label)."),
+    recipe: Path = typer.Argument(..., metavar="RECIPE", help="Recipe (manifests/*.toml)."),
+    data: Path = typer.Option(..., "--data", metavar="DATA",
+                              help="Labelled dataset folder (sc2data rollout, then sc2data "
+                                   "label)."),
     out: Optional[Path] = typer.Option(None, "--out", help="Pair-set folder [default: "
                                                            "DATA/pairs-<recipe name>]."),
     progress: Optional[bool] = None,
 ) -> None:
     """Draw the recipe's matched, mismatched and null pairs; pack the stacks of each split."""
+    from sc2data.folders import expect_dataset
     from sc2data.pairs.pairset import make_pairset
     from sc2data.recipe import load
 
     r = load(recipe)
+    # A recipe of several sources reads each from a folder inside --data.
+    expect_dataset(data, "--data", builds=bool(getattr(r, "sources", None)))
     s = make_pairset(r, data, out or data / f"pairs-{r.name}", progress=progress)
     typer.echo(("pair set is up to date (same recipe, same labels): " if s.up_to_date else
                 f"pair set written in {s.seconds:.1f} s: ") + str(s.out))
@@ -318,12 +375,15 @@ def pair(
 @app.command()
 @with_options(PROGRESS, RAY)
 def build(
-    recipe: Path = typer.Argument(..., help="Recipe (manifests/*.toml)."),
-    out: Path = typer.Option(..., "--out", help="Build folder (created; rerun to resume)."),
+    recipe: Path = typer.Argument(..., metavar="RECIPE", help="Recipe (manifests/*.toml)."),
+    out: Path = typer.Option(..., "--out", help="Build folder (created; rerun to resume): "
+                                                "OUT/rollout the dataset, OUT/pairs the pair "
+                                                "set."),
     workers: Optional[int] = typer.Option(None, help="Rollout and label processes [default: 2]; "
                                                      "with --ray, tasks at once [default: all "
                                                      "CPUs]. The data does not depend on it."),
-    rules_dir: Optional[Path] = typer.Option(None, "--rules-dir", help=_RULES_DIR_HELP),
+    rules_dir: Optional[Path] = typer.Option(None, "--rules-dir", metavar="DIR",
+                                             help=_RULES_DIR_HELP),
     progress: Optional[bool] = None,
     ray: Optional[RayArgs] = None,
 ) -> None:
@@ -342,10 +402,15 @@ def build(
     typer.echo(f"train with: sc2data train {out / PAIRS_DIR} --out RUN")
 
 
+_FOLDER_HELP = ("A folder sc2data writes: a dataset, pair set, training run, RL run or build "
+                "folder.")
+
+
 @app.command()
-def info(folder: Path = typer.Argument(..., help="A dataset, pair-set or run folder.")) -> None:
+def info(folder: Path = typer.Argument(..., metavar="FOLDER", help=_FOLDER_HELP)) -> None:
     """What a folder holds: a dataset (episodes, bytes, schema, shards, marines, labels per rule),
-    a pair set (pairs per split and kind, commands) or a training run (settings, curves, eval)."""
+    a pair set (pairs per split and kind, commands), a training run (settings, curves, eval), an
+    RL run (settings, progress, curve, eval) or a build (its dataset and pair set)."""
     from sc2data.folders import info as report
 
     for line in report(folder):
@@ -353,9 +418,9 @@ def info(folder: Path = typer.Argument(..., help="A dataset, pair-set or run fol
 
 
 @app.command()
-def verify(folder: Path = typer.Argument(..., help="A dataset, pair-set or run folder.")) -> None:
-    """Check every checksum and record of a dataset (and its labels), a pair set or a training
-    run; exit 1 on any fault."""
+def verify(folder: Path = typer.Argument(..., metavar="FOLDER", help=_FOLDER_HELP)) -> None:
+    """Check every checksum and record of a dataset (and its labels), a pair set, a training run,
+    an RL run or a build; exit 1 on any fault."""
     from sc2data.folders import verify_folder
 
     kind, faults, notes = verify_folder(folder)
@@ -369,7 +434,8 @@ def verify(folder: Path = typer.Argument(..., help="A dataset, pair-set or run f
 
 @app.command("train")
 @with_options(config_options(TrainConfig, arguments={
-    "data": "Pair-set folder (sc2data pair / build output)."}, flags={"progress": "--progress/--no-progress"}))
+    "data": ("PAIRS", "Pair-set folder (sc2data pair --out, or a build's OUT/pairs).")},
+    flags={"progress": "--progress/--no-progress"}, metavars={"out": "PATH", "vectors": "PATH"}))
 def train_cmd(config: Optional[TrainConfig] = None) -> None:
     """Train the mutual-embedding model; keep the checkpoint of minimum validation loss."""
     from sc2data.model.train import train
@@ -381,11 +447,13 @@ def train_cmd(config: Optional[TrainConfig] = None) -> None:
 @app.command("evaluate")
 @with_options(PROGRESS)
 def evaluate_cmd(
-    run: Path = typer.Argument(..., help="Run folder (sc2data train --out)."),
-    data: Optional[Path] = typer.Option(None, help="Pair-set folder [default: the run's]."),
+    run: Path = typer.Argument(..., metavar="RUN", help="Run folder (sc2data train --out)."),
+    data: Optional[Path] = typer.Option(None, metavar="PAIRS",
+                                        help="Pair-set folder [default: the run's]."),
     device: str = typer.Option("auto", help="auto, cpu or cuda."),
-    text: list[str] = typer.Option([], "--text", help="A phrasing to measure, as "
-                                   "\"PHRASE=command_id\" (repeatable)."),
+    text: list[str] = typer.Option([], "--text", metavar="PHRASE=ID",
+                                   help="A phrasing to measure, as \"PHRASE=command_id\" "
+                                        "(repeatable)."),
     allow_unfinished: bool = typer.Option(False, help="Evaluate a run that did not finish."),
     other_data: bool = typer.Option(False, help="Evaluate on a pair set other than the run's own "
                                                 "(report: RUN/eval-<fingerprint>.json)."),
@@ -402,12 +470,14 @@ def evaluate_cmd(
 @app.command("tsne")
 @with_options(PROGRESS)
 def tsne_cmd(
-    run: Path = typer.Argument(..., help="Run folder (sc2data train --out)."),
-    data: Optional[Path] = typer.Option(None, help="Pair-set folder [default: the run's]."),
+    run: Path = typer.Argument(..., metavar="RUN", help="Run folder (sc2data train --out)."),
+    data: Optional[Path] = typer.Option(None, metavar="PAIRS",
+                                        help="Pair-set folder [default: the run's]."),
     out: Optional[Path] = typer.Option(None, help="PNG path [default: RUN/tsne.png]."),
     states: int = typer.Option(2000, min=1, help="Test states to plot (a random sample)."),
-    text: list[str] = typer.Option([], "--text", help="Extra command text to mark, "
-                                   "\"PHRASE\" or \"PHRASE=command_id\" (repeatable)."),
+    text: list[str] = typer.Option([], "--text", metavar="PHRASE[=ID]",
+                                   help="Extra command text to mark, \"PHRASE\" or "
+                                        "\"PHRASE=command_id\" (repeatable)."),
     seed: int = typer.Option(0, help="Seed of the sample and of t-SNE."),
     device: str = typer.Option("auto", help="auto, cpu or cuda."),
     allow_unfinished: bool = typer.Option(False, help="Draw a run that did not finish."),
@@ -418,3 +488,32 @@ def tsne_cmd(
 
     path = tsne(run, data, out, states, seed, text, device, allow_unfinished, progress)
     typer.echo(f"wrote {path}")
+
+
+@app.command("export")
+@with_options(PROGRESS)
+def export_cmd(
+    data: Path = typer.Argument(..., metavar="DATA", help="Dataset folder (sc2data rollout "
+                                                          "--out)."),
+    to: str = typer.Option(..., "--to", metavar="FORMAT",
+                           help="npz (numpy files), minari (a Minari dataset) or hf (a Hugging "
+                                "Face datasets dataset)."),
+    out: Path = typer.Option(..., "--out", help="Folder to write (made whole, or not at all)."),
+    name: Optional[str] = typer.Option(None, "--name", help="The dataset's name (Minari id "
+                                       "sc2data/NAME-v0) [default: DATA's folder name]."),
+    episodes: Optional[int] = typer.Option(None, "--episodes", help="Export the first N "
+                                           "episodes [default: all]."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing OUT."),
+    progress: Optional[bool] = None,
+) -> None:
+    """Export the episodes of DATA for other tools: observations (T+1 per episode), the pysc2
+    actions, rewards, terminations and truncations; read back by numpy, Minari or datasets."""
+    from sc2data.data.export import export
+    from sc2data.folders import expect_dataset
+
+    expect_dataset(data)
+    s = export(data, to, out, name=name, episodes=episodes, overwrite=overwrite,
+               progress=progress)
+    typer.echo(f"wrote {s.out} ({s.to}): {plural(s.episodes, 'episode')}, "
+               f"{plural(s.steps, 'step')}, {s.bytes:,} bytes in {s.seconds:.1f} s")
+    typer.echo(f"read it with: {s.read_with}")

@@ -127,12 +127,17 @@ class FolderLock:
     """
 
     def __init__(self, folder: Path, command: str, *, exclusive: bool = True,
-                 wait_s: float | None = None, name: str = LOCK, what: Path | None = None
-                 ) -> None:
+                 wait_s: float | None = None, name: str = LOCK, what: Path | None = None,
+                 remove: bool = False) -> None:
         """``name``: the lock file in ``folder``; ``what``: the path named in the refusal (a
-        folder that is written whole and renamed into place is locked from beside it)."""
+        folder that is written whole and renamed into place is locked from beside it);
+        ``remove``: delete the lock file when the command ends, still holding it (an exclusive
+        lock never shared: a build folder keeps no ``.lock``). A command that waited on a lock
+        file removed meanwhile takes the one now at its path."""
         self.folder, self.command, self.what = folder, command, what or folder
-        self._fd = _open_lock(folder / name)
+        self._path = folder / name
+        self._remove = remove and exclusive
+        self._fd = _open_lock(self._path)
         try:
             self._take(fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH,
                        LOCK_WAIT_S if wait_s is None else wait_s)
@@ -140,18 +145,32 @@ class FolderLock:
                 os.ftruncate(self._fd, 0)
                 os.pwrite(self._fd, f"sc2data {command} (pid {os.getpid()})\n".encode(), 0)
         except BaseException:
-            os.close(self._fd)
+            if self._fd >= 0:
+                os.close(self._fd)
             raise
 
     def _holder(self) -> str:
         return (_record(self._fd) or "sc2data command").split(" (pid")[0]
+
+    def _current(self) -> bool:
+        """Whether the locked file is still the one at the lock's path (its holder may have
+        removed it when it ended)."""
+        try:
+            here, mine = os.lstat(self._path), os.fstat(self._fd)
+        except FileNotFoundError:
+            return False
+        return (here.st_dev, here.st_ino) == (mine.st_dev, mine.st_ino)
 
     def _take(self, mode: int, wait_s: float) -> None:
         deadline = time.monotonic() + wait_s
         while True:
             try:
                 fcntl.flock(self._fd, mode | fcntl.LOCK_NB)
-                return
+                if self._current():
+                    return
+                os.close(self._fd)  # removed by the command that held it: take the new one
+                self._fd = -1
+                self._fd = _open_lock(self._path)
             except BlockingIOError:
                 if time.monotonic() >= deadline:
                     raise Sc2DataError(f"another {self._holder()} is writing to {self.what}; "
@@ -161,11 +180,15 @@ class FolderLock:
     def share(self) -> None:
         """Downgrade to a shared lock, so that this run's workers can take theirs."""
         fcntl.flock(self._fd, fcntl.LOCK_SH)
+        self._remove = False
 
     def __enter__(self) -> FolderLock:
         return self
 
     def __exit__(self, *exc: object) -> None:
+        if self._remove and self._current():
+            with contextlib.suppress(OSError):
+                self._path.unlink()
         os.close(self._fd)
 
 

@@ -1,5 +1,6 @@
-"""The folders sc2data writes — a dataset (with its labels), a pair set, a training run — told
-apart by their files, described (``sc2data info``) and checked (``sc2data verify``).
+"""The folders sc2data writes — a dataset (with its labels), a pair set, a training run, an RL
+run, a build — told apart by their files, described (``sc2data info``) and checked
+(``sc2data verify``).
 
 ``verify`` checks everything a folder's readers rely on, by content:
 
@@ -9,7 +10,11 @@ apart by their files, described (``sc2data info``) and checked (``sc2data verify
 * a pair set (``pairset.json``): its header, ``pairs.parquet`` and the packed splits against the
   recorded fingerprint, each split's schema and rows, and every packed chunk through its checksum;
 * a training run (``state.json``): every run file against its recorded sha256, and the checkpoint
-  loads (an unfinished run is reported as such, not as a fault).
+  loads (an unfinished run is reported as such, not as a fault);
+* an RL run (``sc2data rl train --out``: ``config.json`` with an ``action_space``, ``model.zip``):
+  its settings and progress records, the checkpoint archive through every member's CRC-32, the
+  learning curve and evaluation reports (one not checkpointed yet is a note, not a fault);
+* a build folder (``sc2data build --out``: ``rollout/`` and ``pairs/``): both, as above.
 
 A folder that a live command is writing (it holds the folder's lock) is not checked: its files
 change under the check, and a half-committed epoch is no damage. ``verify`` says which command
@@ -18,29 +23,87 @@ is writing it, in one line, and ``info`` marks what it shows as a moment of a wr
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from sc2data.cliopts import plural
 from sc2data.errors import Sc2DataError
 from sc2data.files import writer
 from sc2data.formats import Shape, check_record, loads
 
 
+DATASET, PAIRSET, RUN, RL_RUN, BUILD = "dataset", "pair set", "training run", "RL run", "build"
+"""What :func:`kind` answers."""
+
+
+def _rl_run(folder: Path) -> bool:
+    """An ``sc2data rl train`` run: a checkpoint or curve of its own, or a ``config.json`` naming
+    an action space (what a MEM run's never does)."""
+    if (folder / "model.zip").is_file() or (folder / "curve.csv").is_file():
+        return True
+    try:
+        record = json.loads((folder / "config.json").read_text())
+    except (OSError, ValueError):
+        return False
+    return isinstance(record, dict) and "action_space" in record
+
+
 def kind(folder: Path) -> str:
-    """``dataset``, ``pair set`` or ``training run``; a one-line error for anything else."""
+    """:data:`DATASET`, :data:`PAIRSET`, :data:`RUN`, :data:`RL_RUN` or :data:`BUILD`; a
+    one-line error for anything else."""
+    from sc2data.build import PAIRS_DIR, ROLLOUT_DIR
+
     if not folder.is_dir():
         why = "it is a file" if folder.exists() else "it does not exist"
         raise Sc2DataError(f"{folder} is not a folder sc2data writes ({why})")
     if (folder / "dataset.json").is_file():
-        return "dataset"
+        return DATASET
     if (folder / "pairset.json").is_file():
-        return "pair set"
+        return PAIRSET
+    if _rl_run(folder):
+        return RL_RUN
     if (folder / "state.json").is_file() or (folder / "config.json").is_file():
-        return "training run"
-    raise Sc2DataError(f"{folder} holds no dataset.json, pairset.json or state.json: not a "
-                       f"dataset (sc2data rollout), pair set (sc2data pair) or training run "
-                       f"(sc2data train) folder")
+        return RUN
+    if (folder / ROLLOUT_DIR / "dataset.json").is_file() or \
+            (folder / PAIRS_DIR / "pairset.json").is_file():
+        return BUILD
+    raise Sc2DataError(f"{folder} holds no dataset.json, pairset.json, state.json or "
+                       f"config.json: not a dataset (sc2data rollout), pair set (sc2data pair), "
+                       f"training run (sc2data train), RL run (sc2data rl train) or build "
+                       f"(sc2data build) folder")
+
+
+def expect_dataset(folder: Path, flag: str = "DATA", *, builds: bool = False) -> Path:
+    """``folder`` if it is a dataset folder, or could become one (absent, or none of sc2data's);
+    a one-line error naming the dataset to pass instead when it is another folder sc2data
+    writes (a pair set's source, a build's ``rollout/``; ``builds``: let a build folder pass,
+    for a command that reads datasets inside it)."""
+    from sc2data.build import ROLLOUT_DIR
+
+    try:
+        what = kind(folder)
+    except Sc2DataError:
+        return folder  # the command's own check says what is wrong
+    if what == DATASET or (what == BUILD and builds):
+        return folder
+    if what == BUILD:
+        raise Sc2DataError(f"{folder} is a build folder (sc2data build --out); its dataset is "
+                           f"{folder / ROLLOUT_DIR}: pass that as {flag}")
+    if what == PAIRSET:
+        try:
+            source = loads((folder / "pairset.json").read_text())["data"]["path"]
+        except (OSError, ValueError, KeyError, TypeError):
+            source = None
+        where = f" ({source})" if isinstance(source, str) else ""
+        raise Sc2DataError(f"{folder} is a pair set (sc2data pair), not a dataset; pass as {flag} "
+                           f"the labelled dataset folder its pairs were drawn from{where}")
+    made, article = ("sc2data rl train", "an") if what == RL_RUN else ("sc2data train", "a")
+    raise Sc2DataError(f"{folder} is {article} {what} ({made} --out), not a dataset; pass as "
+                       f"{flag} a dataset folder (sc2data rollout --out)")
 
 
 def verify_folder(folder: Path) -> tuple[str, list[str], list[str]]:
@@ -48,12 +111,10 @@ def verify_folder(folder: Path) -> tuple[str, list[str], list[str]]:
     (before the check, or when one that found faults ends)."""
     _not_being_written(folder)
     what = kind(folder)
-    if what == "dataset":
-        faults, notes = _dataset(folder)
-    elif what == "pair set":
-        faults, notes = _pairset(folder), []
+    if what == BUILD:
+        faults, notes = _build(folder)
     else:
-        faults, notes = _run(folder)
+        faults, notes = _CHECKS[what](folder)
     if faults:  # a write that began during the check changed files under it
         _not_being_written(folder)
     return what, faults, notes
@@ -79,10 +140,14 @@ def info(folder: Path) -> list[str]:
     what = kind(folder)
     note = [f"writing   {holder} is writing this folder now: what follows may change", ""] \
         if holder else []
-    if what == "dataset":
+    if what == DATASET:
         return note + _dataset_info(folder)
-    if what == "pair set":
+    if what == PAIRSET:
         return note + _pairset_info(folder)
+    if what == RL_RUN:
+        return note + _rl_info(folder)
+    if what == BUILD:
+        return note + _build_info(folder)
     return note + _run_info(folder)
 
 
@@ -96,7 +161,7 @@ def _dataset_info(folder: Path) -> list[str]:
     if len(marines):
         lines += ["", f"marines per episode (the game's score, from the index): mean "
                       f"{marines.mean():.1f}, min {marines.min():.0f}, max {marines.max():.0f} "
-                      f"over {len(marines)} episodes"]
+                      f"over {plural(len(marines), 'episode')}"]
     if not (folder / LABELS_FILE).exists():
         return lines + ["labels    none yet (sc2data label)"]
     try:
@@ -131,6 +196,16 @@ def _pairset_info(folder: Path) -> list[str]:
     lines += ["", "commands"] + [f"  {c['id']:<20} {c['text']!r}" + (
         f"  held-out paraphrases: {', '.join(map(repr, c['paraphrases']))}"
         if c.get("paraphrases") else "") for c in p.commands]
+    sources = meta.get("data", {}).get("sources") if isinstance(meta.get("data"), dict) else None
+    if isinstance(sources, list):  # a recipe of several sources: the mix
+        lines += ["", "sources (the pairs drawn from each)",
+                  f"  {'name':<10} {'share':>6} {'train':>7} {'val':>7} {'test':>7}  agent, data"]
+        for src in sources:
+            per = src.get("states", {})
+            n = [sum(per.get(s, {}).values()) for s in SPLITS]
+            lines.append(f"  {src.get('name', '?'):<10} {100 * float(src.get('share', 0)):>5.1f}% "
+                         + " ".join(f"{k:>7,}" for k in n)
+                         + f"  {src.get('settings', {}).get('agent', '?')}, {src.get('path')}")
     return lines
 
 
@@ -204,6 +279,10 @@ def _dataset(folder: Path) -> tuple[list[str], list[str]]:
     return faults + _faults_of(lambda: read_labels(folder)), ["labels checked"]
 
 
+def _pairset_faults(folder: Path) -> tuple[list[str], list[str]]:
+    return _pairset(folder), []
+
+
 def _pairset(folder: Path) -> list[str]:
     from sc2data.pairs.loader import PairSet
     from sc2data.vocab import SPLITS
@@ -240,3 +319,172 @@ def _run(folder: Path) -> tuple[list[str], list[str]]:
     notes = [] if state["finished"] else [f"unfinished: {state.get('epochs_done')} of "
                                           f"{state.get('epochs')} epochs"]
     return [], notes
+
+
+# -- RL runs -----------------------------------------------------------------------------------
+EVALS = ("eval.json", "eval-stochastic.json")
+"""An RL run's evaluation reports (``eval-stochastic.json`` from runs evaluated before both
+modes went into ``eval.json``)."""
+SCORES: Shape = {"mean": float, "std": float}
+EVAL_REPORT: Shape = {"episodes": int, "sampled?": SCORES, "argmax?": SCORES, "mean?": float,
+                      "std?": float, "deterministic?": bool}
+"""What ``info`` reads of an RL evaluation report: sampled and argmax scores, or (older) one
+mode's."""
+
+
+def _rl_records(folder: Path) -> tuple[dict[str, Any], dict[str, Any] | None]:
+    """An RL run's settings (``config.json``) and progress (``state.json``, None before the
+    first checkpoint), both checked."""
+    from sc2data.rl.train import STATE_SHAPE, read_config
+
+    config = read_config(folder)
+    path = folder / "state.json"
+    if not path.is_file():
+        return config, None
+    try:
+        state = loads(path.read_text())
+    except (OSError, ValueError) as e:
+        raise Sc2DataError(f"{path} is unreadable ({e}); delete {folder} and train it again, "
+                           f"or pick another --out") from None
+    check_record(state, STATE_SHAPE, path, f"delete {folder} and train it again, or pick "
+                                           f"another --out")
+    return config, state
+
+
+def _rl_evals(folder: Path) -> list[tuple[str, dict[str, Any]]]:
+    out = []
+    for name in EVALS:
+        path = folder / name
+        if path.is_file():
+            try:
+                record = loads(path.read_text())
+            except (OSError, ValueError) as e:
+                raise Sc2DataError(f"{path} is unreadable ({e}); rerun sc2data rl evaluate "
+                                   f"{folder}") from None
+            check_record(record, EVAL_REPORT, path, f"rerun sc2data rl evaluate {folder}")
+            out.append((name, record))
+    return out
+
+
+def _rl_info(folder: Path) -> list[str]:
+    from sc2data.rl.train import read_curve
+
+    config, state = _rl_records(folder)
+    done = "no checkpoint yet (rerun the same sc2data rl train command to resume)" \
+        if state is None or not (folder / "model.zip").is_file() else \
+        (f"{plural(state['timesteps'], 'decision')}, {plural(state['env_steps'], 'pysc2 step')}, "
+         f"{plural(state['episodes'], 'episode')}, resumed {plural(state['resumes'], 'time')}")
+    narration = config.get("narration") or "the shipped BuildMarines narration"
+    lines = [f"RL run    {folder}",
+             f"reward    {config['reward']}" + (f" (MEM {config.get('mem')}, narration "
+                                               f"{narration})" if config["reward"] == "narration"
+                                               else ""),
+             f"progress  {done}",
+             "settings  " + "  ".join(f"{k}={config.get(k)}" for k in
+                                      ("action_space", "obs", "envs", "seed", "bonus",
+                                       "threshold", "rollout", "batch_size", "policy"))]
+    try:
+        rows = read_curve(folder)
+    except (OSError, ValueError, KeyError) as e:
+        raise Sc2DataError(f"{folder / 'curve.csv'} is unreadable ({e}); rerun the same "
+                           f"sc2data rl train command to rewrite it") from None
+    if rows:
+        marines = np.array([r["marines"] for r in rows])
+        tail = marines[-10:]
+        lines += ["", f"curve     {plural(len(rows), 'training episode')}: marines per episode "
+                      f"{marines.mean():.1f} mean, {tail.mean():.1f} over the last {len(tail)}"]
+    for name, ev in _rl_evals(folder):
+        modes = [(m, ev[m]) for m in ("sampled", "argmax") if m in ev] or \
+            [("argmax" if ev.get("deterministic", True) else "sampled", ev)]
+        for mode, score in modes:
+            if "mean" in score:
+                lines.append(f"eval      {mode}: {score['mean']:.2f} ± {score.get('std', 0):.2f} "
+                             f"marines per episode over {plural(ev['episodes'], 'episode')} "
+                             f"({name})")
+    return lines
+
+
+def _rl(folder: Path) -> tuple[list[str], list[str]]:
+    import zipfile
+
+    from sc2data.rl.train import read_curve
+
+    try:
+        config, state = _rl_records(folder)
+    except Sc2DataError as e:
+        return [str(e)], []
+    faults: list[str] = []
+    notes: list[str] = []
+    model = folder / "model.zip"
+    if state is None or not model.is_file():
+        notes.append("no checkpoint yet")
+    else:
+        try:
+            with zipfile.ZipFile(model) as archive:
+                bad = archive.testzip()
+            if bad is not None:
+                faults.append(f"{model} is damaged: its member {bad} fails its CRC-32 check; "
+                              f"delete {folder} and train it again")
+        except (OSError, zipfile.BadZipFile, EOFError) as e:
+            faults.append(f"{model} is not a readable checkpoint ({type(e).__name__}: {e}); "
+                          f"delete {folder} and train it again")
+    try:
+        rows = read_curve(folder)
+        if state is not None and rows and max(r["timesteps"] for r in rows) > state["timesteps"] \
+                + config["envs"] * config["rollout"]:
+            faults.append(f"{folder / 'curve.csv'} runs past the {state['timesteps']} decisions "
+                          f"state.json records; rerun the same sc2data rl train command")
+    except (OSError, ValueError, KeyError) as e:
+        faults.append(f"{folder / 'curve.csv'} is unreadable ({e}); rerun the same sc2data rl "
+                      f"train command to rewrite it")
+    faults += _faults_of(lambda: _rl_evals(folder))
+    return faults, notes
+
+
+# -- build folders -----------------------------------------------------------------------------
+def _build_parts(folder: Path) -> list[tuple[str, Path]]:
+    from sc2data.build import PAIRS_DIR, ROLLOUT_DIR
+
+    return [(what, folder / sub) for what, sub in ((DATASET, ROLLOUT_DIR), (PAIRSET, PAIRS_DIR))]
+
+
+def _build_info(folder: Path) -> list[str]:
+    lines = [f"build     {folder} (sc2data build): its dataset and its pair set", ""]
+    for what, part in _build_parts(folder):
+        if kind_of(part) != what:
+            lines += [f"{part.name:<9} not made yet (rerun the sc2data build command to "
+                      f"resume)", ""]
+            continue
+        try:
+            lines += (_dataset_info(part) if what == DATASET else _pairset_info(part)) + [""]
+        except Sc2DataError as e:
+            lines += [f"{part.name:<9} not usable: {e}", ""]
+    return lines[:-1]
+
+
+def _build(folder: Path) -> tuple[list[str], list[str]]:
+    faults: list[str] = []
+    notes: list[str] = []
+    for what, part in _build_parts(folder):
+        if kind_of(part) != what:
+            notes.append(f"{part.name}/ not made yet")
+            continue
+        _not_being_written(part)
+        f, n = _CHECKS[what](part)
+        faults += f
+        notes += [f"{part.name}/: {x}" for x in n] or [f"{part.name}/ checked"]
+    return faults, notes
+
+
+def kind_of(folder: Path) -> str | None:
+    """:func:`kind`, or None for a folder that is none of sc2data's."""
+    try:
+        return kind(folder)
+    except Sc2DataError:
+        return None
+
+
+_CHECKS: dict[str, Callable[[Path], tuple[list[str], list[str]]]] = {
+    DATASET: lambda f: _dataset(f), PAIRSET: _pairset_faults, RUN: lambda f: _run(f),
+    RL_RUN: lambda f: _rl(f)}
+"""``verify`` of each kind but a build (faults, notes)."""

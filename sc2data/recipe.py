@@ -27,6 +27,21 @@ wrong type or an impossible count is an error that names the field. Example (the
     train = 0.6667
     val = 0.1667
     test = 0.1666
+
+A recipe may draw from several datasets: ``[sources.NAME]`` tables (two or more), each a
+``share`` of every command's states and of the null states in every split, plus any
+``[rollout]`` key in which its data differs (``agent = "policy:runs/rl"``, ``episodes``)::
+
+    [sources.random]
+    share = 0.5
+    [sources.policy]
+    share = 0.5
+    agent = "policy:runs/rl-narr"
+    episodes = 10
+
+``sc2data pair RECIPE --data DIR`` then reads source NAME from ``DIR/NAME`` (see
+:mod:`sc2data.pairs.draw`). Without ``[sources]``, the recipe's one source is its
+``[rollout]``, and its pairs are what they always were.
 """
 
 from __future__ import annotations
@@ -72,6 +87,17 @@ class RolloutSpec:
     """Layer set: ``paper`` (13 screen + 7 minimap) or ``full`` (27 + 11)."""
     step_mul: int = STEP_MUL
     """Game loops per agent step."""
+
+
+@dataclass(frozen=True)
+class Source:
+    """One dataset a recipe draws from: its rollout settings and its share of the states."""
+
+    name: str
+    """Names the dataset folder: ``pair --data DIR`` reads it from ``DIR/NAME``."""
+    share: float
+    """Share of every command's states (and of the null states) in every split taken from it."""
+    rollout: RolloutSpec
 
 
 @dataclass(frozen=True)
@@ -122,10 +148,17 @@ class Recipe:
     description: str = ""
     source: str = ""
     """Path the recipe was read from (not part of its identity)."""
+    sources: tuple[Source, ...] = ()
+    """The datasets it draws from, two or more; none: its one dataset is ``rollout``'s."""
 
     @property
     def rule_ids(self) -> tuple[str, ...]:
         return tuple(c.id for c in self.commands)
+
+    @property
+    def shares(self) -> tuple[float, ...]:
+        """Each source's share, in order (``(1.0,)`` for a recipe of one source)."""
+        return tuple(s.share for s in self.sources) or (1.0,)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able form recorded in every manifest and pair set (``source`` left out)."""
@@ -134,6 +167,8 @@ class Recipe:
         for c in d["commands"]:  # absent when empty: older recipes keep their identity
             if not c["train_paraphrases"]:
                 del c["train_paraphrases"]
+        if not self.sources:  # likewise
+            del d["sources"]
         return d
 
 
@@ -191,7 +226,7 @@ def parse(data: Mapping[str, Any], source: str = "<recipe>") -> Recipe:
     """Validate a recipe's TOML tables and build a :class:`Recipe`."""
     w = source
     _check_keys(w, data, {"name": str, "seed": int, "description": str, "rollout": dict,
-                          "commands": dict, "pairs": dict, "split": dict},
+                          "commands": dict, "pairs": dict, "split": dict, "sources": dict},
                 required=("name", "seed", "rollout", "commands", "pairs"))
     if not NAME.fullmatch(data["name"]) or ".." in data["name"]:
         raise RecipeError(f"{w}: name {data['name'][:80]!r} must be 1–64 letters, digits, '.', "
@@ -200,16 +235,8 @@ def parse(data: Mapping[str, Any], source: str = "<recipe>") -> Recipe:
         raise RecipeError(f"{w}: seed must be a non-negative 64-bit integer; got {data['seed']}")
 
     r = data["rollout"]
-    _check_keys(f"{w} [rollout]", r, {"env": str, "agent": str, "episodes": int, "layers": str,
-                                      "step_mul": int})
-    rollout = RolloutSpec(**r)
-    _choice(f"{w} [rollout].env", rollout.env, BACKENDS)
-    _choice(f"{w} [rollout].layers", rollout.layers, LAYER_SETS)
-    _positive(f"{w} [rollout].episodes", rollout.episodes)
-    if rollout.episodes > MAX_EPISODES:
-        raise RecipeError(f"{w} [rollout].episodes must be at most {MAX_EPISODES:,}; got "
-                          f"{rollout.episodes:,}")
-    _positive(f"{w} [rollout].step_mul", rollout.step_mul)
+    rollout = _rollout(f"{w} [rollout]", r)
+    sources = _sources(w, data.get("sources", {}), r)
 
     if not data["commands"]:
         raise RecipeError(f"{w} [commands]: at least one command is needed")
@@ -263,7 +290,59 @@ def parse(data: Mapping[str, Any], source: str = "<recipe>") -> Recipe:
 
     return Recipe(name=data["name"], seed=data["seed"], rollout=rollout, commands=tuple(commands),
                   pairs=pairs, split=split, description=data.get("description", ""),
-                  source=source)
+                  source=source, sources=sources)
+
+
+_ROLLOUT_KEYS: dict[str, type] = {"env": str, "agent": str, "episodes": int, "layers": str,
+                                  "step_mul": int}
+
+
+def _rollout(where: str, r: Mapping[str, Any]) -> RolloutSpec:
+    _check_keys(where, r, _ROLLOUT_KEYS)
+    rollout = RolloutSpec(**r)
+    _choice(f"{where}.env", rollout.env, BACKENDS)
+    _choice(f"{where}.layers", rollout.layers, LAYER_SETS)
+    _positive(f"{where}.episodes", rollout.episodes)
+    if rollout.episodes > MAX_EPISODES:
+        raise RecipeError(f"{where}.episodes must be at most {MAX_EPISODES:,}; got "
+                          f"{rollout.episodes:,}")
+    _positive(f"{where}.step_mul", rollout.step_mul)
+    return rollout
+
+
+def _sources(w: str, table: Mapping[str, Any], defaults: Mapping[str, Any]
+             ) -> tuple[Source, ...]:
+    """``[sources.NAME]``: two or more, each a share and the ``[rollout]`` keys it changes;
+    shares positive and summing to 1; one layer set for all (pairs pack their stacks
+    together)."""
+    if not table:
+        return ()
+    if len(table) < 2:
+        raise RecipeError(f"{w} [sources]: one source needs no [sources] table; give its "
+                          f"settings in [rollout]")
+    sources = []
+    for name, t in table.items():
+        where = f"{w} [sources.{name}]"
+        if not isinstance(t, dict):
+            raise RecipeError(f"{where} must be a table with share = ...")
+        if not NAME.fullmatch(name) or ".." in name:
+            raise RecipeError(f"{where}: the name must be 1–64 letters, digits, '.', '_' or '-' "
+                              f"(it names the source's folder)")
+        _check_keys(where, t, {"share": (int, float), **_ROLLOUT_KEYS}, required=("share",))
+        share = float(t["share"])
+        if not (share > 0 and math.isfinite(share)):
+            raise RecipeError(f"{where}.share must be positive; got {t['share']}")
+        spec = _rollout(where, {**defaults, **{k: v for k, v in t.items() if k != "share"}})
+        sources.append(Source(name, share, spec))
+    total = sum(s.share for s in sources)
+    if abs(total - 1.0) > 1e-3:
+        raise RecipeError(f"{w} [sources]: the shares must sum to 1; got "
+                          f"{', '.join(f'{s.name} {s.share:g}' for s in sources)}")
+    layers = {s.rollout.layers for s in sources}
+    if len(layers) > 1:
+        raise RecipeError(f"{w} [sources]: every source needs the same layers (their stacks "
+                          f"are packed together); got {', '.join(sorted(layers))}")
+    return tuple(Source(s.name, s.share / total, s.rollout) for s in sources)
 
 
 def _check_phrases(where: str, commands: Sequence[Command]) -> None:

@@ -63,6 +63,19 @@ def shard_stats(path: Path) -> ShardStats:
         shard.close()
 
 
+def _codec(codec: Any) -> str:
+    """A dataset's codec record in words: ``zstd+fletcher32, level 3, 4 frames a chunk``."""
+    if not isinstance(codec, dict):
+        return str(codec)
+    parts = [str(codec.get("name", "?"))]
+    if "level" in codec:
+        parts.append(f"level {codec['level']}")
+    if "chunk_frames" in codec:
+        parts.append(f"{codec['chunk_frames']} frames a chunk")
+    parts += [f"{k} {v}" for k, v in codec.items() if k not in ("name", "level", "chunk_frames")]
+    return ", ".join(parts)
+
+
 def info(folder: Path) -> list[str]:
     """A plain-text report: totals, settings, the schema with stored bytes per key, shards."""
     manifest = read_manifest(folder)
@@ -82,7 +95,7 @@ def info(folder: Path) -> list[str]:
              f"{schema.frame_bytes() / max(per_frame, 1):,.0f}x)",
              "settings  " + "  ".join(f"{k}={v}" for k, v in manifest["settings"].items()
                                       if k != "codec"),
-             f"codec     {manifest['settings'].get('codec')}",
+             f"codec     {_codec(manifest['settings'].get('codec'))}",
              f"versions  {'  '.join(f'{k} {v}' for k, v in manifest.get('versions', {}).items())}",
              "", f"{'key':28s} {'dtype':7s} {'shape':10s} {'scale':>6s} {'kind':12s} "
                  "stored in"]

@@ -23,7 +23,7 @@ import random
 import shutil
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -69,6 +69,8 @@ each shard through :func:`write_shard`, feeding the progress ``bar``; returns wh
 _SETTINGS_ORDER = ("env", "agent", "episodes", "seed", "layers", "episodes_per_shard", "max_steps",
                    "step_mul", "recipe", "codec")
 """Key order of the settings JSON in ``dataset.json`` and every shard (kept so bytes stay equal)."""
+_OPTIONAL_SETTINGS = ("agent_sha256",)
+"""Settings recorded only when set, after the others: data made without them keeps its bytes."""
 
 
 @dataclass(frozen=True)
@@ -86,6 +88,9 @@ class RolloutConfig(RolloutSpec):
     """The recipe (``manifests/*.toml``) these settings came from, if any."""
     codec: Codec = field(default_factory=Codec)
     """Chunking and compression of frame datasets."""
+    agent_sha256: str | None = None
+    """The sha256 of what the agent loads (a ``policy:RUN`` agent's ``model.zip``): which
+    checkpoint made the data. Filled in by :func:`rollout`; a dataset grows only with the same."""
 
     def validate(self) -> None:
         """Raise :class:`Sc2DataError` on settings no rollout can run with."""
@@ -113,7 +118,15 @@ class RolloutConfig(RolloutSpec):
 
     @classmethod
     def from_recipe(cls, recipe: Recipe, **overrides: Any) -> RolloutConfig:
-        """The rollout settings of a parsed recipe (:func:`sc2data.recipe.load`)."""
+        """The rollout settings of a parsed recipe (:func:`sc2data.recipe.load`) of one source;
+        a recipe of several says in one line how to roll each out."""
+        if recipe.sources:
+            each = "; ".join(f"sc2data rollout --agent {s.rollout.agent} --episodes "
+                             f"{s.rollout.episodes} --seed {recipe.seed} --out DIR/{s.name}"
+                             for s in recipe.sources)
+            raise Sc2DataError(f"recipe {recipe.name!r} draws from {len(recipe.sources)} "
+                               f"datasets; roll each out ({each}), label each (sc2data label "
+                               f"DIR/NAME), then sc2data pair RECIPE --data DIR")
         spec = {f.name: getattr(recipe.rollout, f.name) for f in fields(RolloutSpec)}
         return cls(**{**spec, "seed": recipe.seed, "recipe": recipe.name, **overrides})
 
@@ -122,6 +135,7 @@ class RolloutConfig(RolloutSpec):
         """The config whose :meth:`settings` are ``settings`` (a ``dataset.json``'s)."""
         try:
             return cls(**{**{k: settings[k] for k in _SETTINGS_ORDER},
+                          **{k: settings[k] for k in _OPTIONAL_SETTINGS if k in settings},
                           "codec": Codec.from_dict(settings["codec"])})
         except (KeyError, TypeError, ValueError) as e:
             raise Sc2DataError(f"unreadable rollout settings ({e!r})") from None
@@ -142,7 +156,8 @@ class RolloutConfig(RolloutSpec):
         """JSON form, recorded in ``dataset.json`` and in every shard."""
         d = asdict(self)
         d["codec"] = self.codec.to_dict()
-        return {k: d[k] for k in _SETTINGS_ORDER}
+        return {**{k: d[k] for k in _SETTINGS_ORDER},
+                **{k: d[k] for k in _OPTIONAL_SETTINGS if d[k] is not None}}
 
 
 def episode_seeds(seed: int, episode: int) -> tuple[int, int]:
@@ -167,6 +182,22 @@ def _make_agent(name: str, seed: int) -> base_agent.BaseAgent:
 
 def default_agent_factory(config: RolloutConfig) -> AgentFactory:
     return functools.partial(_make_agent, config.agent)
+
+
+def resolve_agent(config: RolloutConfig) -> tuple[RolloutConfig, AgentFactory]:
+    """``config`` with the sha256 of what its agent loads, and the agent's factory; one line for
+    an unknown agent, or for a checkpoint other than the one the config records (a policy
+    trained on since its data was rolled out: that data's agent no longer exists)."""
+    from sc2data.game.agents import AGENTS, resolve_agent as resolve
+
+    spec = resolve(config.agent)
+    if config.agent_sha256 not in (None, spec.sha256):
+        raise Sc2DataError(f"agent {config.agent} is not the one that made this data: its "
+                           f"checkpoint's sha256 is {str(spec.sha256)[:12]}…, the data records "
+                           f"{config.agent_sha256[:12]}…; roll the new policy out into another "
+                           f"--out")
+    factory = default_agent_factory(config) if config.agent in AGENTS else spec.factory
+    return replace(config, agent_sha256=spec.sha256), factory
 
 
 # -- one shard ----------------------------------------------------------------------------------
@@ -280,7 +311,8 @@ def check_folder(config: RolloutConfig, out: Path) -> None:
                                f"sc2data reads and verifies but does not add to (it writes "
                                f"format {DATASET.version}); roll out into a new --out")
         settings = old.get("settings", {})
-        diff = [k for k in _differences(settings, config.settings()) if k != "episodes"]
+        diff = [k for k in _differences(settings, config.settings()) if k != "episodes"
+                and not (k == "agent_sha256" and config.agent_sha256 is None)]  # not resolved yet
         if diff:
             raise Sc2DataError(f"{out} holds a dataset made with other settings (differs in: "
                                f"{', '.join(diff)}); use another --out or delete it")
@@ -421,16 +453,13 @@ def rollout(config: RolloutConfig, out: str | os.PathLike[str], workers: int = 1
     config.validate()
     if workers < 1:
         raise Sc2DataError(f"workers must be at least 1, not {workers}")
+    if agent_factory is None:  # an unknown name (or a changed checkpoint) fails before writing
+        config, agent_factory = resolve_agent(config)
     check_folder(config, out)
     if env_factory is None:
         if config.env == "sc2" and not envs.sc2_available():
             envs.make_env("sc2")  # raises the one-line install hint
         env_factory = default_env_factory(config)
-    if agent_factory is None:
-        from sc2data.game.agents import make_agent
-
-        make_agent(config.agent, seed=0)  # an unknown name fails here, before any writing
-        agent_factory = default_agent_factory(config)
     started = time.perf_counter()
     made = not out.exists()
     create_folder(out)

@@ -13,6 +13,14 @@ Every agent reads only what pysc2 observes (screen layers, ``player``, ``single_
   idle SCVs back to mining, and, near the supply ceiling, its own marines killed with Attack_screen
   (as the published scripted agent does) to make room for more.
 
+Agents of other rooms: a name ``kind:ARG`` (``policy:RUN``, a trained ``sc2data rl`` policy)
+is resolved through :data:`AGENT_KINDS`, which the room that defines the kind fills when it is
+imported (:func:`register_agent_kind`; ``sc2data.rl`` registers ``policy``). The game room plays
+agents but must not import the rooms above it (``tests/test_layout.py``): a registry filled from
+above keeps the import arrow pointing down, and the factory a kind returns is a picklable object
+of its own room, so a spawned rollout worker that unpickles it imports (and registers) that room
+itself.
+
 Macros are generators of calls over successive agent steps; each call is checked against
 ``available_actions`` and, when unavailable, the macro is dropped and the agent plays ``no_op``.
 Lack of minerals is not visible there (the game refuses such orders silently), so the scripted
@@ -21,7 +29,9 @@ agent checks ``player.minerals`` itself.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Generator, Iterator
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -354,19 +364,67 @@ AGENTS: dict[str, Callable[[int], base_agent.BaseAgent]] = {
 """Agent factories by name; each takes the seed."""
 
 
+@dataclass(frozen=True)
+class AgentSpec:
+    """An agent name resolved: how to make one per episode, and what a dataset records of it."""
+
+    factory: Callable[[int], base_agent.BaseAgent]
+    """``seed -> agent``; picklable (rollout workers are spawned processes)."""
+    sha256: str | None = None
+    """The sha256 of what the agent loads (a policy's checkpoint), recorded with the data so that
+    a dataset says exactly which agent made it; None for agents that load nothing."""
+    about: dict[str, Any] = field(default_factory=dict)
+    """More about it, for people (a policy's action space, reward, trained steps)."""
+
+
+AgentKind = Callable[[str], AgentSpec]
+"""Resolves the ``ARG`` of an agent name ``kind:ARG``; a one-line error on a bad one."""
+
+AGENT_KINDS: dict[str, AgentKind] = {}
+"""Agent kinds by prefix, registered by the rooms that define them (see the module docstring)."""
+
+KIND_HOMES: dict[str, str] = {"policy": "sc2data.rl"}
+"""Where each kind sc2data defines comes from, for the error when it is not registered yet."""
+
+
+def register_agent_kind(kind: str, resolve: AgentKind) -> None:
+    """Make agent names ``kind:ARG`` resolve through ``resolve`` (idempotent for one kind)."""
+    if not kind.isidentifier() or kind in AGENTS:
+        raise ValueError(f"agent kind {kind!r} must be an identifier and no agent's name")
+    AGENT_KINDS[kind] = resolve
+
+
+def _named(name: str, seed: int) -> base_agent.BaseAgent:
+    return AGENTS[name](seed)
+
+
+def resolve_agent(name: str) -> AgentSpec:
+    """The :class:`AgentSpec` of a registry name or a ``kind:ARG`` name; one line if unknown."""
+    if name in AGENTS:
+        return AgentSpec(functools.partial(_named, name))
+    kind, sep, arg = name.partition(":")
+    if sep and kind in AGENT_KINDS:
+        if not arg:
+            raise Sc2DataError(f"agent {name!r} names no {kind}: write {kind}:ARG")
+        return AGENT_KINDS[kind](arg)
+    choices = [*AGENTS, *(f"{k}:…" for k in AGENT_KINDS)]
+    hint = ""
+    if sep and kind in KIND_HOMES:
+        hint = f" ({kind}:… agents come with {KIND_HOMES[kind]}: import it first)"
+    raise Sc2DataError(f"unknown agent {name!r}; choose one of: {', '.join(choices)}{hint}")
+
+
 def make_agent(name: str, *, seed: int) -> base_agent.BaseAgent:
-    """A new agent by registry name; call ``setup(obs_spec, action_spec)`` before use.
+    """A new agent by registry name (or ``kind:ARG``, e.g. ``policy:RUN``); call
+    ``setup(obs_spec, action_spec)`` before use.
 
     Seeding: ``random`` draws from its own ``numpy.random.RandomState(seed)`` (the same calls
     pysc2's agent makes after ``numpy.random.seed(seed)``); ``reduced-random`` and ``scripted``
     draw from ``numpy.random.default_rng(seed)`` (the scripted agent only to pick which SCV to
-    click). None touches a global RNG, so one seed and one environment seed give one episode.
+    click); a ``policy`` samples from its own torch generator seeded with ``seed``. None touches
+    a global RNG, so one seed and one environment seed give one episode.
     """
-    try:
-        factory = AGENTS[name]
-    except KeyError:
-        raise Sc2DataError(f"unknown agent {name!r}; choose one of: {', '.join(AGENTS)}") from None
-    return factory(seed)
+    return resolve_agent(name).factory(seed)
 
 
 def play(env: Any, agent: base_agent.BaseAgent, steps: int | None = None) -> Iterator[Any]:

@@ -20,6 +20,13 @@ phrasings change no state, split, kind or command id of the pairs — only the t
 column — and a recipe without them draws exactly the pairs it always did. Validation and test
 pairs keep the canonical text: test accuracy stays the paper's measure, and the held-out
 ``paraphrases`` are never drawn at all (evaluation re-scores test pairs with them).
+
+Several sources (a recipe's ``[sources]``: say the reduced-random rollout and a trained policy's):
+each source's episodes are split on their own (episode-disjoint within every source), and every
+quota — each command's and the null one, in every split — is apportioned over the sources by
+their shares (largest remainder), so each split holds each source's share of each command. The
+pairs gain a ``source`` column (episodes are numbered per source). A recipe of one source draws
+exactly what it always drew: the same generator calls in the same order.
 """
 
 from __future__ import annotations
@@ -40,6 +47,9 @@ PAIR_SCHEMA = pa.schema([
     ("kind", pa.string()), ("label", pa.string()),
 ])
 """Columns of pairs.parquet before packing adds ``state`` (see docs/pairset.md)."""
+SOURCES_SCHEMA = pa.schema([PAIR_SCHEMA.field(0), ("source", pa.string()),
+                            *(PAIR_SCHEMA.field(i) for i in range(1, len(PAIR_SCHEMA)))])
+"""The same for a recipe of several sources: ``source`` names each state's dataset."""
 P_CANONICAL = 0.5
 """Share of training pairs (of a command with training phrasings) that keep the canonical text."""
 MARGIN = 1.25
@@ -72,6 +82,15 @@ class Labelled:
             raise ValueError("episode, step and fires must have the same length")
 
 
+class SourceShortage(NotEnoughStates):
+    """Too few states in some sources of a recipe of several: per short source, the episodes
+    that should meet its quotas (None: more of its data cannot help)."""
+
+    def __init__(self, shortfall: str, hint: str, sources: dict[str, int | None]) -> None:
+        super().__init__(shortfall, hint, None)
+        self.sources = sources
+
+
 def _assign_episodes(episodes: np.ndarray, fractions: Sequence[float],
                      rng: np.random.Generator) -> dict[int, int]:
     """Map each episode to a split index, shuffled, in proportion to the fractions."""
@@ -86,22 +105,45 @@ def _assign_episodes(episodes: np.ndarray, fractions: Sequence[float],
     return {int(e): int(s) for e, s in zip(shuffled, split_of)}
 
 
-def build_pairs(recipe: Recipe, data: Labelled) -> pa.Table:
-    """Draw the recipe's pairs from labelled stacks; deterministic for ``recipe.seed``."""
-    order = np.lexsort((data.step, data.episode))  # input order must not matter
-    episode, step, fires = data.episode[order], data.step[order], data.fires[order]
+def build_pairs(recipe: Recipe, data: Labelled | Sequence[Labelled]) -> pa.Table:
+    """Draw the recipe's pairs from labelled stacks (one :class:`Labelled` per source, in the
+    recipe's order); deterministic for ``recipe.seed``."""
+    sources = [data] if isinstance(data, Labelled) else list(data)
+    shares = recipe.shares
+    names = [s.name for s in recipe.sources] or [""]
+    if len(sources) != len(shares):
+        raise ValueError(f"recipe {recipe.name!r} has {len(shares)} source(s), got {len(sources)}")
+    parts = []
+    for d in sources:
+        order = np.lexsort((d.step, d.episode))  # input order must not matter
+        parts.append((d.episode[order], d.step[order], d.fires[order]))
+    episode = np.concatenate([p[0] for p in parts])
+    step = np.concatenate([p[1] for p in parts])
+    fires = np.concatenate([p[2] for p in parts])
+    src = np.repeat(np.arange(len(parts)), [len(p[0]) for p in parts])
     commands = recipe.commands
     n_cmd = len(commands)
     rng = np.random.default_rng(np.random.SeedSequence([recipe.seed, 0x5C2DA7A]))
     fractions = recipe.split.fractions
     is_null = ~fires.any(axis=1)
 
-    n_episodes = len(np.unique(episode))
-    if recipe.split.method == "episode" and n_episodes < len(fractions):
-        raise _too_few_episodes(recipe, fires, is_null, n_episodes)
+    n_episodes = len(np.unique(episode)) if len(parts) == 1 else 0
     if recipe.split.method == "episode":
-        split_map = _assign_episodes(episode, fractions, rng)
-        split_of = np.fromiter((split_map[int(e)] for e in episode), np.int64, len(episode))
+        for k, (e, _, f) in enumerate(parts):
+            n = len(np.unique(e))
+            if n < len(fractions):
+                error = _too_few_episodes(recipe, f, ~f.any(axis=1), n)
+                if len(parts) == 1:
+                    raise error
+                raise SourceShortage(f"source {names[k]}: {error.shortfall}",
+                                     f"grow source {names[k]}", {names[k]: error.episodes})
+    if recipe.split.method == "episode":
+        split_of = np.empty(len(episode), np.int64)
+        for k in range(len(parts)):  # each source's episodes split on their own
+            mine = src == k
+            split_map = _assign_episodes(episode[mine], fractions, rng)
+            split_of[mine] = np.fromiter((split_map[int(e)] for e in episode[mine]), np.int64,
+                                         int(mine.sum()))
         quotas = np.array([apportion(recipe.pairs.states_per_command, fractions)] * n_cmd).T
         null_quota = apportion(recipe.pairs.null_states, fractions)
         pools = list(range(len(SPLITS)))
@@ -125,25 +167,31 @@ def build_pairs(recipe: Recipe, data: Labelled) -> pa.Table:
             unmet.append((what, found, need))
         return found < need
 
+    def what(name: str, k: int) -> str:
+        return name if len(parts) == 1 else f"{name} from {names[k]}"
+
     for pool in pools:
-        in_pool = split_of == pool
-        # Rarest command first, so a stack satisfying two commands serves the scarcer one.
-        rarity = np.argsort((fires & in_pool[:, None]).sum(axis=0), kind="stable")
-        for c in rarity:
-            need = int(quotas[pool][c])
-            cand = np.flatnonzero(fires[:, c] & in_pool & ~used)
-            if short(commands[c].id, len(cand), need):
-                continue
-            pick = np.sort(rng.choice(cand, size=need, replace=False))
-            used[pick] = True
-            chosen.append((pool, pick, np.full(need, c)))
-        need = null_quota[pool]
-        cand = np.flatnonzero(is_null & in_pool)
-        if not short("null", len(cand), need):
-            chosen.append((pool, np.sort(rng.choice(cand, size=need, replace=False)),
-                           np.full(need, -1)))
-    if unmet:
+        for k in range(len(parts)):
+            mine = (split_of == pool) & (src == k)
+            # Rarest command first, so a stack satisfying two commands serves the scarcer one.
+            rarity = np.argsort((fires & mine[:, None]).sum(axis=0), kind="stable")
+            for c in rarity:
+                need = apportion(int(quotas[pool][c]), shares)[k]
+                cand = np.flatnonzero(fires[:, c] & mine & ~used)
+                if short(what(commands[c].id, k), len(cand), need):
+                    continue
+                pick = np.sort(rng.choice(cand, size=need, replace=False))
+                used[pick] = True
+                chosen.append((pool, pick, np.full(need, c)))
+            need = apportion(null_quota[pool], shares)[k]
+            cand = np.flatnonzero(is_null & mine)
+            if not short(what("null", k), len(cand), need):
+                chosen.append((pool, np.sort(rng.choice(cand, size=need, replace=False)),
+                               np.full(need, -1)))
+    if unmet and len(parts) == 1:
         raise _shortage(recipe, fires, is_null, filled, unmet, n_episodes)
+    if unmet:
+        raise _source_shortage(recipe, parts, names, filled, unmet)
 
     columns: dict[str, list[np.ndarray]] = {k: [] for k in ("pool", "idx", "cmd", "target",
                                                              "kind", "label")}
@@ -171,8 +219,11 @@ def build_pairs(recipe: Recipe, data: Labelled) -> pa.Table:
     if recipe.split.method == "random":
         pool = rng.permutation(np.repeat(np.arange(len(SPLITS)), apportion(len(idx), fractions)))
     texts = np.array([c.text for c in commands], dtype=object)
+    source = {"source": pa.array(np.array(names, dtype=object)[src[idx]], pa.string())} \
+        if len(parts) > 1 else {}
     table = pa.table({
         "split": pa.array(np.array(SPLITS, dtype=object)[pool], pa.string()),
+        **source,
         "episode": pa.array(episode[idx], pa.int64()),
         "step": pa.array(step[idx], pa.int32()),
         "command_id": pa.array(ids[cmd], pa.string()),
@@ -180,9 +231,9 @@ def build_pairs(recipe: Recipe, data: Labelled) -> pa.Table:
         "target": pa.array(np.concatenate(columns["target"]), pa.float32()),
         "kind": pa.array(np.concatenate(columns["kind"]), pa.string()),
         "label": pa.array(np.concatenate(columns["label"]), pa.string()),
-    }, schema=PAIR_SCHEMA)
-    # Stable, readable order: by split, then by state.
-    keys = np.lexsort((step[idx], episode[idx], pool))
+    }, schema=PAIR_SCHEMA if len(parts) == 1 else SOURCES_SCHEMA)
+    # Stable, readable order: by split, then by state (source, episode, step).
+    keys = np.lexsort((step[idx], episode[idx], src[idx], pool))
     table = table.take(pa.array(keys))
     if any(c.train_paraphrases for c in commands):
         texts = draw_texts(commands, cmd[keys], pool[keys] == SPLITS.index("train"), recipe.seed)
@@ -249,6 +300,28 @@ def _too_few_episodes(recipe: Recipe, fires: np.ndarray, is_null: np.ndarray, n_
     ratio = max([n / have[w] for w, n in asks.items() if n] or [0.0])
     want = max(k, int(np.ceil(n_episodes * ratio * MARGIN)))
     return NotEnoughStates(shortfall, f"roll out {want} episodes in all", want)
+
+
+def _source_shortage(recipe: Recipe, parts: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]],
+                     names: Sequence[str], filled: dict[str, list[int]],
+                     unmet: list[tuple[str, int, int]]) -> SourceShortage:
+    """Unmet quotas of a recipe of several sources: each short one, then per short source the
+    episodes that should meet its quotas, as :func:`_shortage` reckons them on its data."""
+    parts_short, need = [], {}
+    for k, name in enumerate(names):
+        suffix = f" from {name}"
+        mine = {w[:-len(suffix)]: f for w, f in filled.items() if w.endswith(suffix)}
+        short = [(w[:-len(suffix)], f, n) for w, f, n in unmet if w.endswith(suffix)]
+        if not short:
+            continue
+        episode, _, fires = parts[k]
+        e = _shortage(recipe, fires, ~fires.any(axis=1), mine, short, len(np.unique(episode)))
+        parts_short.append(f"{name}: " + e.shortfall.split(": ", 1)[1])
+        need[name] = e.episodes
+    shortfall = f"too few labelled states for the recipe's sources: {'; '.join(parts_short)}"
+    hint = ", ".join(f"grow {n} to {e} episodes" if e else f"{n} can never fill it (check its "
+                     f"agent and the rules)" for n, e in need.items())
+    return SourceShortage(shortfall, hint, need)
 
 
 def _shortage(recipe: Recipe, fires: np.ndarray, is_null: np.ndarray,

@@ -3,6 +3,12 @@
 The output folder is the trainer's input (``docs/pairset.md``). It is built under a temporary
 name and renamed into place when complete, so an interrupted run never leaves a pair set that
 looks finished; a folder already built from the same recipe, labels and data is kept as it is.
+
+A recipe of several sources (``[sources.NAME]``) reads each from ``DATA/NAME``. Every source is
+checked before anything is written — it exists and is a labelled dataset of the recipe's rules
+(the same rules' code in all), rolled out as its source says, its shards the bytes its index
+recorded, one schema for all — and a source with too few states is named in the one-line error
+with the episodes it needs.
 """
 
 from __future__ import annotations
@@ -12,6 +18,7 @@ import os
 import shlex
 import shutil
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -26,6 +33,7 @@ from sc2data.errors import Sc2DataError, reason
 from sc2data.files import (
     PARTIAL,
     FolderLock,
+    sha256_file,
     check_out,
     fsync_path,
     publish,
@@ -34,7 +42,7 @@ from sc2data.files import (
 )
 from sc2data.formats import PAIRSET, loads
 from sc2data.labels.apply import labels_fingerprint
-from sc2data.pairs.draw import Labelled, NotEnoughStates, build_pairs
+from sc2data.pairs.draw import Labelled, NotEnoughStates, SourceShortage, build_pairs
 from sc2data.pairs.layout import (
     META_FILE,
     PACKED_DIR,
@@ -46,7 +54,8 @@ from sc2data.pairs.layout import (
 from sc2data.pairs.packed import PackedWriter
 from sc2data.progress import Bar
 from sc2data.provenance import versions
-from sc2data.recipe import Recipe
+from sc2data.recipe import Recipe, RolloutSpec
+from sc2data.schema import StackBatch
 from sc2data.vocab import SPLITS
 
 READ_BATCH = 1024
@@ -90,10 +99,12 @@ def check_texts(recipe: Recipe, rule_commands: dict[str, str]) -> None:
                                f"recipe and list other wordings as train_paraphrases or paraphrases")
 
 
-def check_rollout(recipe: Recipe, settings: dict[str, Any], data: Path) -> None:
-    """The data was rolled out as the recipe's ``[rollout]`` says (backend, agent, layers,
-    step_mul): a pair set records the recipe as its provenance, so the claim must be true."""
-    spec = recipe.rollout
+def check_rollout(recipe: Recipe, settings: dict[str, Any], data: Path,
+                  spec: RolloutSpec | None = None) -> None:
+    """The data was rolled out as the recipe's ``[rollout]`` (or its source's ``spec``) says
+    (backend, agent, layers, step_mul): a pair set records the recipe as its provenance, so the
+    claim must be true."""
+    spec = spec or recipe.rollout
     differ = [f"{k} {settings.get(k)!r} (recipe: {getattr(spec, k)!r})"
               for k in ("env", "agent", "layers", "step_mul") if settings.get(k) != getattr(spec, k)]
     if differ:
@@ -113,8 +124,10 @@ def check_current(labels_meta: dict[str, Any], data: Path) -> None:
                            f"or was rolled out again); relabel it: sc2data label {data}")
 
 
-def labelled_stacks(recipe: Recipe, data: Path) -> tuple[Labelled, dict[str, Any]]:
-    """Every stack of ``data`` with the recipe's rules' verdicts, from ``sc2data label``'s files."""
+def labelled_stacks(recipe: Recipe, data: Path, spec: RolloutSpec | None = None
+                    ) -> tuple[Labelled, dict[str, Any]]:
+    """Every stack of ``data`` with the recipe's rules' verdicts, from ``sc2data label``'s files
+    (``spec``: the rollout settings the data must have, default the recipe's ``[rollout]``)."""
     from sc2data.labels.store import read_labels
 
     labels = read_labels(data)
@@ -125,7 +138,7 @@ def labelled_stacks(recipe: Recipe, data: Path) -> tuple[Labelled, dict[str, Any
                            f"with: {', '.join(ids)}); relabel with sc2data label {data} --rules "
                            f"{','.join(recipe.rule_ids)}")
     check_texts(recipe, {r["id"]: r["command"] for r in labels.meta["rules"]})
-    check_rollout(recipe, labels.meta.get("dataset", {}).get("settings", {}), data)
+    check_rollout(recipe, labels.meta.get("dataset", {}).get("settings", {}), data, spec)
     check_current(labels.meta, data)
     t = labels.stacks
     fires = np.stack([t[c.id].to_numpy(zero_copy_only=False) for c in recipe.commands], axis=1)
@@ -153,11 +166,15 @@ def grow_command(data: Path, episodes: int, rules: list[dict[str, Any]]) -> str:
     return f"sc2data rollout --out {q} --episodes {episodes} && sc2data label {q}{options}"
 
 
-def _identity(recipe: Recipe, labels_meta: dict[str, Any]) -> dict[str, Any]:
+def _identity(recipe: Recipe, labels_meta: dict[str, Any],
+              sources: list[dict[str, Any]] | None = None) -> dict[str, Any]:
     """What decides a pair set's content: the recipe and the labels it was drawn from (their
     fingerprint: the same rules' code on the same shards, so the same labels; never when they
-    were made, so a relabel with identical content keeps the pair set)."""
-    identity = {"recipe": recipe.to_dict(), "labels": labels_meta.get("fingerprint")}
+    were made, so a relabel with identical content keeps the pair set); with several
+    ``sources`` (their labels' records), every source's labels by name."""
+    labels = labels_meta.get("fingerprint") if sources is None else \
+        {s.name: m.get("fingerprint") for s, m in zip(recipe.sources, sources)}
+    identity = {"recipe": recipe.to_dict(), "labels": labels}
     return json.loads(json.dumps(identity))  # as it reads back from pairset.json
 
 
@@ -249,17 +266,24 @@ def _existing(out: Path, identity: dict[str, Any]) -> dict[str, Any] | None:
     return meta
 
 
-def _pack_split(ds: Dataset, split: str, pairs: pa.Table, path: Path, seed: int,
-                progress: Bar) -> tuple[pa.Table, int]:
+def _pack_split(ds: Dataset | Sequence[Dataset], split: str, pairs: pa.Table, path: Path,
+                seed: int, progress: Bar, names: Sequence[str] = ()) -> tuple[pa.Table, int]:
     """Copy the split's distinct stacks into ``path``; add each pair's ``state`` row.
 
     Rows go episode by episode, the episodes in a seeded random order and each episode's steps
     in order: reads stay nearly sequential (an episode's chunks are decoded once), while any
     block of rows mixes several episodes from anywhere in the data for the trainer to shuffle.
+    With several sources (``ds`` one dataset per name of ``names``, the pairs' ``source``
+    column naming them) an "episode" is a (source, episode) pair.
     """
+    datasets = list(ds) if isinstance(ds, Sequence) else [ds]
     episode = pairs["episode"].to_numpy()
     step = pairs["step"].to_numpy().astype(np.int64)
     keys = episode * (1 << 20) + step  # episodes have far fewer than 2**20 steps
+    if "source" in pairs.column_names:  # source above bit 52, episode number below it
+        index = {n: i for i, n in enumerate(names)}
+        source = np.array([index[n] for n in pairs["source"].to_pylist()], np.int64)
+        keys = keys + (source << _SOURCE_SHIFT)
     unique, inverse = np.unique(keys, return_inverse=True)
     rng = np.random.default_rng(np.random.SeedSequence([seed, SPLITS.index(split), 0x9AC4]))
     episodes = np.unique(unique >> 20)
@@ -267,17 +291,87 @@ def _pack_split(ds: Dataset, split: str, pairs: pa.Table, path: Path, seed: int,
     order = np.lexsort((unique, np.array([rank[e] for e in (unique >> 20).tolist()])))
     row_of = np.empty(len(unique), np.int64)  # row r of the file holds stack unique[order[r]]
     row_of[order] = np.arange(len(unique))
-    writer = PackedWriter(path, ds.schema, len(unique), attrs={"split": split})
+    writer = PackedWriter(path, datasets[0].schema, len(unique), attrs={"split": split})
     try:
         for start in range(0, len(unique), READ_BATCH):
             k = unique[order[start:start + READ_BATCH]]
-            writer.write(ds.read(k >> 20, k & ((1 << 20) - 1)))
+            writer.write(_read(datasets, k))
             progress.update(len(k))
         writer.close()
     except BaseException:
         writer.abort()
         raise
     return pairs.append_column("state", pa.array(row_of[inverse], pa.int64())), len(unique)
+
+
+_SOURCE_SHIFT = 52
+"""Packing keys: ``source << 52 | episode << 20 | step``."""
+
+
+def _read(datasets: Sequence[Dataset], k: np.ndarray) -> StackBatch:
+    """The stacks of packing keys ``k``, in order, from the datasets their sources name."""
+    source = k >> _SOURCE_SHIFT
+    episode = (k >> 20) & ((1 << (_SOURCE_SHIFT - 20)) - 1)
+    step = k & ((1 << 20) - 1)
+    if len(datasets) == 1:
+        return datasets[0].read(episode, step)
+    arrays: dict[str, np.ndarray] = {}
+    for u in np.unique(source).tolist():
+        m = source == u
+        for key, a in datasets[u].read(episode[m], step[m]).arrays.items():
+            arrays.setdefault(key, np.empty((len(k), *a.shape[1:]), a.dtype))[m] = a
+    return StackBatch(arrays, datasets[0].schema)
+
+
+def _check_shards(folder: Path) -> None:
+    """One line unless every shard the index lists is the bytes it recorded."""
+    from sc2data.data.dataset import read_index
+
+    index = read_index(folder).to_pydict()
+    for name, sha in sorted(set(zip(index["shard"], index["shard_sha256"]))):
+        path = folder / name
+        if not path.is_file() or sha256_file(path) != sha:
+            raise Sc2DataError(f"{path} is missing, damaged or replaced (not the sha256 the index "
+                               f"recorded); run sc2data verify {folder}")
+
+
+def _check_sources(recipe: Recipe, data: Path) -> tuple[list[Labelled], list[dict[str, Any]]]:
+    """Each of a recipe's sources (``DATA/NAME``) as labelled stacks, with its labels' record;
+    a one-line error naming the first that is missing, damaged, rolled out otherwise than its
+    source says, labelled by other rules' code, or of another schema than the first."""
+    from sc2data.data.dataset import read_manifest
+
+    labelled, metas = [], []
+    first: tuple[str, dict[str, Any], dict[str, Any]] | None = None
+    for source in recipe.sources:
+        folder = data / source.name
+        try:
+            if not folder.is_dir():
+                raise Sc2DataError(f"{folder} does not exist; roll it out: sc2data rollout "
+                                   f"--agent {source.rollout.agent} --episodes "
+                                   f"{source.rollout.episodes} --out {folder}, then sc2data "
+                                   f"label {folder}")
+            manifest = read_manifest(folder)
+            _check_shards(folder)
+            found, meta = labelled_stacks(recipe, folder, source.rollout)
+        except Sc2DataError as e:
+            raise Sc2DataError(f"source {source.name}: {e}") from None
+        rules = {r["id"]: r.get("code_sha256") for r in meta.get("rules", [])
+                 if r.get("id") in recipe.rule_ids}
+        if first is None:
+            first = (source.name, manifest["schema"], rules)
+        elif manifest["schema"] != first[1]:
+            raise Sc2DataError(f"source {source.name} ({folder}) holds other layers than source "
+                               f"{first[0]}; their stacks cannot be paired together: roll it out "
+                               f"with the same layers")
+        elif rules != first[2]:
+            other = sorted(k for k in rules if rules[k] != first[2].get(k))
+            raise Sc2DataError(f"source {source.name} was labelled with other code of rule(s) "
+                               f"{', '.join(other)} than source {first[0]}; relabel both with "
+                               f"this sc2data (sc2data label DATA)")
+        labelled.append(found)
+        metas.append(meta)
+    return labelled, metas
 
 
 def make_pairset(recipe: Recipe, data: str | os.PathLike[str], out: str | os.PathLike[str], *,
@@ -288,8 +382,15 @@ def make_pairset(recipe: Recipe, data: str | os.PathLike[str], out: str | os.Pat
     started = time.perf_counter()
     data, out = Path(data), Path(out)
     check_out(out)
-    read_manifest(data)  # the dataset's own record first, then its labels
-    labelled, labels_meta = labelled_stacks(recipe, data)
+    drawn = None
+    if recipe.sources:
+        labelled, sources = _check_sources(recipe, data)
+        labels_meta = sources[0]
+        drawn = _draw(recipe, labelled, data, labels_meta)  # too few states: before any lock
+    else:
+        read_manifest(data)  # the dataset's own record first, then its labels
+        one, labels_meta = labelled_stacks(recipe, data)
+        labelled, sources = [one], []
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
     except OSError as e:
@@ -298,17 +399,23 @@ def make_pairset(recipe: Recipe, data: str | os.PathLike[str], out: str | os.Pat
     # The folder is built beside its final name and renamed into place: locked from beside it.
     with FolderLock(out.parent, "pair", name=f".{out.name}.lock", what=out):
         try:
-            return _make(recipe, data, out, labelled, labels_meta, started, progress)
+            return _make(recipe, data, out, labelled, labels_meta, started, progress,
+                         sources, drawn)
         except OSError as e:
             raise Sc2DataError(f"cannot write the pair set {out}: {reason(e)}; check the "
                                f"folder is writable and has space") from None
 
 
-def _draw(recipe: Recipe, labelled: Labelled, data: Path, labels_meta: dict[str, Any]
+def _draw(recipe: Recipe, labelled: list[Labelled], data: Path, labels_meta: dict[str, Any]
           ) -> pa.Table:
     """The recipe's pairs; too few states name the command that grows the data enough."""
     try:
         return build_pairs(recipe, labelled)
+    except SourceShortage as e:
+        grow = "; ".join(grow_command(data / name, n, labels_meta.get("rules", []))
+                         for name, n in e.sources.items() if n)
+        hint = str(e)[len(e.shortfall) + 2:]
+        raise NotEnoughStates(e.shortfall, hint + (f": {grow}" if grow else ""), None) from None
     except NotEnoughStates as e:
         if e.episodes is None:
             raise
@@ -316,17 +423,19 @@ def _draw(recipe: Recipe, labelled: Labelled, data: Path, labels_meta: dict[str,
         raise NotEnoughStates(e.shortfall, f"grow the data: {command}", e.episodes) from None
 
 
-def _make(recipe: Recipe, data: Path, out: Path, labelled: Labelled,
-          labels_meta: dict[str, Any], started: float, progress: bool | None) -> PairsetSummary:
+def _make(recipe: Recipe, data: Path, out: Path, labelled: list[Labelled],
+          labels_meta: dict[str, Any], started: float, progress: bool | None,
+          sources: list[dict[str, Any]], drawn: pa.Table | None) -> PairsetSummary:
     """``make_pairset`` under its lock."""
     from sc2data.data.dataset import open_dataset
     from sc2data.progress import bar as progress_bar
 
-    identity = _identity(recipe, labels_meta)
+    identity = _identity(recipe, labels_meta, sources or None)
     done = _existing(out, identity)
     if done is None and out.exists() and any(out.iterdir()):
-        try:
-            done = _relabelled(out, identity, labels_meta, build_pairs(recipe, labelled))
+        try:  # (kept for one source: several sources' labels are compared whole)
+            done = None if sources else _relabelled(out, identity, labels_meta,
+                                                    build_pairs(recipe, labelled))
         except NotEnoughStates:  # these labels cannot draw it: not the same pair set
             done = None
         if done is None:
@@ -335,20 +444,24 @@ def _make(recipe: Recipe, data: Path, out: Path, labelled: Labelled,
         return PairsetSummary(out, done["counts"], {s: v["states"] for s, v in
                                                     done["splits"].items()},
                               time.perf_counter() - started, up_to_date=True)
-    pairs = _draw(recipe, labelled, data, labels_meta)
-    ds = open_dataset(data)
+    pairs = drawn if drawn is not None else _draw(recipe, labelled, data, labels_meta)
+    names = [s.name for s in recipe.sources]
+    folders = [data / n for n in names] or [data]
+    datasets = [open_dataset(f) for f in folders]
+    ds = datasets[0]
     tmp = out.with_name(f".{out.name}{PARTIAL}")
     shutil.rmtree(tmp, ignore_errors=True)
     (tmp / PACKED_DIR).mkdir(parents=True)
     try:
         parts, states = [], {}
-        n_states = len(np.unique(pc.add(pc.multiply(pairs["episode"], 1 << 20),
-                                        pc.cast(pairs["step"], pa.int64())).to_numpy()))
+        n_states = len(pairs.group_by([c for c in ("source", "episode", "step")
+                                       if c in pairs.column_names]).aggregate([]))
         with progress_bar(n_states, desc="pack", unit="stack", show=progress) as bar:
             for split in SPLITS:
                 sub = pairs.filter(pc.equal(pairs["split"], split))
-                part, states[split] = _pack_split(ds, split, sub, packed_path(tmp, split),
-                                                  recipe.seed, bar)
+                part, states[split] = _pack_split(datasets, split, sub,
+                                                  packed_path(tmp, split), recipe.seed, bar,
+                                                  names)
                 parts.append(part)
         table = pa.concat_tables(parts)
         pq.write_table(table, tmp / PAIRS_FILE)
@@ -367,9 +480,12 @@ def _make(recipe: Recipe, data: Path, out: Path, labelled: Labelled,
             "splits": {s: {"pairs": sum(counts.get(s, {}).values()), "states": states[s]}
                        for s in SPLITS},
             "counts": counts,
-            "data": {"path": str(data.resolve()), "settings": ds.settings},
-            "labels": {"fingerprint": labels_meta.get("fingerprint"),
-                       "rules": labels_meta.get("rules")},
+            "data": {"path": str(data.resolve()), "settings": ds.settings} if not names else
+            {"path": str(data.resolve()), "sources": [
+                {"name": s.name, "share": s.share, "path": str(f.resolve()),
+                 "settings": d.settings, "states": _source_states(pairs, s.name)}
+                for s, f, d in zip(recipe.sources, folders, datasets)]},
+            "labels": {"fingerprint": identity["labels"], "rules": labels_meta.get("rules")},
             "identity": identity,
             "fingerprint": sha256_files(files),
             "versions": versions(),
@@ -384,5 +500,16 @@ def _make(recipe: Recipe, data: Path, out: Path, labelled: Labelled,
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     finally:
-        ds.close()
+        for d in datasets:
+            d.close()
     return PairsetSummary(out, counts, states, time.perf_counter() - started)
+
+
+def _source_states(pairs: pa.Table, name: str) -> dict[str, dict[str, int]]:
+    """split → kind → pairs drawn from source ``name``: the mix ``sc2data info`` shows."""
+    mine = pairs.filter(pc.equal(pairs["source"], name))
+    counts: dict[str, dict[str, int]] = {}
+    for s, k in zip(mine["split"].to_pylist(), mine["kind"].to_pylist()):
+        counts.setdefault(s, {}).setdefault(k, 0)
+        counts[s][k] += 1
+    return counts

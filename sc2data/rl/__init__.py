@@ -8,7 +8,8 @@ shaping by the labelling rules, shaping by a narration and a trained MEM
 Importing this package registers ``sc2data/BuildMarines-macro-v0`` and
 ``sc2data/BuildMarines-paper-v0`` with gymnasium (where gymnasium is installed), so
 ``gymnasium.make("sc2data/BuildMarines-macro-v0")`` works after ``import sc2data.rl``; gymnasium
-also imports it itself for ``gymnasium.make("sc2data.rl:sc2data/BuildMarines-macro-v0")``.
+also imports it itself for ``gymnasium.make("sc2data.rl:sc2data/BuildMarines-macro-v0")``. It
+also registers the ``policy:RUN`` rollout agent (:mod:`sc2data.rl.agent`) with the game room.
 """
 
 from __future__ import annotations
@@ -33,3 +34,5 @@ def register() -> None:
 
 
 register()
+
+from sc2data.rl import agent as _agent  # noqa: E402,F401  registers the policy:RUN agent kind

@@ -9,14 +9,29 @@ both judges of each command of the MEM's pair set:
 * the **MEM**: is ``distance(stack, command text) < threshold``?
 
 Per command, with the rule as ground truth: ``precision = TP / (TP + FP)`` (of the stacks the
-MEM matched, the share the rule also fired on: how often a narration bonus is deserved) and
+MEM matched, the share the rule also fired on: how often a narration bonus is deserved),
 ``recall = TP / (TP + FN)`` (of the stacks the rule fired on, the share the MEM matched: how
-often a deserved bonus is paid). Stacks on which no rule fires are "null" stacks; the share of
-them the MEM matches to no command is reported too.
+often a deserved bonus is paid) and their harmonic mean F1. Stacks on which no rule fires are
+"null" stacks; the share of them the MEM matches to no command is reported too.
+
+The two rewards, judged as the field judges a learnt reward (Gleave et al. 2021, *Quantifying
+differences in reward functions*): a stack's **rules reward** is the number of rules that fire
+on it (``--reward rules`` pays ``bonus`` times that), its **narration reward** the number of
+commands the MEM matches (``--reward narration`` pays ``bonus`` for the current command's match;
+over a narration whose current command is any of them alike, that is the same up to scale). Both
+are functions of the transition ``(s, s')``, the stack's two frames. Reported over the visited
+transitions: their Pearson correlation, and the **EPIC distance** — each reward canonicalised
+(:func:`canonical`) to remove potential shaping, then the Pearson distance
+``sqrt((1 − ρ) / 2)`` between the canonical rewards (:func:`pearson_distance`): 0 for rewards
+equal up to shaping and positive scale, 1 for opposite ones. The canonicalisation takes its
+state distribution ``D_S`` uniform over :data:`EPIC_SUPPORT` visited states and is evaluated on
+:data:`EPIC_TRANSITIONS` visited transitions, both drawn with a fixed seed.
 """
 
 from __future__ import annotations
 
+import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -27,17 +42,77 @@ from sc2data.files import write_atomic
 
 AGREEMENT_SEED = 2_000_000
 """First episode seed of an agreement measurement (neither training's nor evaluation's)."""
+EPIC_TRANSITIONS = 512
+"""Visited transitions the EPIC distance is evaluated on (drawn evenly over the episodes)."""
+EPIC_SUPPORT = 32
+"""Visited states the canonicalisation's ``D_S`` is uniform over."""
+BATCH = 512
+"""Stacks per MEM call when rewards are evaluated on drawn transitions."""
+
+PairReward = Callable[[np.ndarray, np.ndarray], np.ndarray]
+"""``reward(i, j)``: the reward of the transitions from state ``i[k]`` to state ``j[k]`` (state
+indices), shape ``(P,)`` or ``(P, K)`` for K rewards at once."""
+
+
+def canonical(reward: PairReward, s: np.ndarray, s2: np.ndarray, support: np.ndarray,
+              gamma: float) -> np.ndarray:
+    """EPIC's canonically shaped reward of the transitions ``(s[k], s2[k])`` (Gleave et al.
+    2021, Definition 4.1), with ``D_S`` uniform over the states ``support`` and rewards that do
+    not depend on the action:
+
+    ``C(R)(s, s') = R(s, s') + γ E[R(s', S')] − E[R(s, S')] − γ E[R(S, S')]``, ``S, S' ~ D_S``.
+
+    A potential shaping ``γΦ(s') − Φ(s)`` added to R leaves C(R) unchanged."""
+    s, s2, support = (np.asarray(a, np.int64) for a in (s, s2, support))
+    states = np.unique(np.concatenate([s, s2]))
+    n = len(support)
+    out_mean = np.asarray(reward(np.repeat(states, n), np.tile(support, len(states))), float)
+    out_mean = out_mean.reshape(len(states), n, *out_mean.shape[1:]).mean(axis=1)
+    whole = np.asarray(reward(np.repeat(support, n), np.tile(support, n)), float).mean(axis=0)
+    at = np.searchsorted(states, s)
+    at2 = np.searchsorted(states, s2)
+    r = np.asarray(reward(s, s2), float)
+    return r + gamma * out_mean[at2] - out_mean[at] - gamma * whole  # type: ignore[no-any-return]
+
+
+def pearson(a: np.ndarray, b: np.ndarray) -> float | None:
+    """Pearson's ρ of two samples; None where either is constant (ρ is undefined)."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    da, db = a - a.mean(), b - b.mean()
+    na, nb = math.sqrt(float((da * da).sum())), math.sqrt(float((db * db).sum()))
+    if na < 1e-12 * max(1.0, float(np.abs(a).max(initial=0))) or \
+            nb < 1e-12 * max(1.0, float(np.abs(b).max(initial=0))):
+        return None
+    return float(np.clip((da * db).sum() / (na * nb), -1.0, 1.0))
+
+
+def pearson_distance(a: np.ndarray, b: np.ndarray) -> float | None:
+    """``sqrt((1 − ρ) / 2)``: 0 for samples equal up to positive affine maps, 1 for opposite."""
+    rho = pearson(a, b)
+    return None if rho is None else math.sqrt((1.0 - rho) / 2.0)
+
+
+def epic_distance(reward: PairReward, s: np.ndarray, s2: np.ndarray, support: np.ndarray,
+                  gamma: float) -> float | None:
+    """The EPIC distance between the two columns of ``reward`` (``(P, 2)``: R_A and R_B), over
+    the transitions ``(s, s2)`` and ``D_S`` uniform over ``support``."""
+    c = canonical(reward, s, s2, support, gamma)
+    return pearson_distance(c[:, 0], c[:, 1])
 
 
 def _ratio(a: int, b: int) -> float | None:
     return a / b if b else None
 
 
+def _f1(tp: int, fp: int, fn: int) -> float | None:
+    return _ratio(2 * tp, 2 * tp + fp + fn)
+
+
 def agreement(run: Path, mem: Path, *, episodes: int = 3, deterministic: bool = False,
               threshold: float | None = None, out: Path | None = None) -> dict[str, Any]:
     """Play ``episodes`` episodes of the policy in ``run``; per-command agreement of the MEM in
-    ``mem`` with the rules on the stacks visited. Written to ``out`` (default
-    ``RUN/agreement.json``) and returned."""
+    ``mem`` with the rules on the stacks visited, and the two rewards' correlation and EPIC
+    distance. Written to ``out`` (default ``RUN/agreement.json``) and returned."""
     from sc2data.rl.train import load_config, play, require_rl
 
     require_rl("sc2data rl agreement")
@@ -52,8 +127,7 @@ def agreement(run: Path, mem: Path, *, episodes: int = 3, deterministic: bool = 
     from sc2data.labels.registry import call, load_registry
     from sc2data.model.reward import load_model
     from sc2data.rl.envs import BuildMarinesGym
-    from sc2data.rl.rewards import stacks_of
-    from sc2data.rulebase import schema_for
+    from sc2data.rulebase import schema_for, stack
     from sc2data.vocab import STEP_MUL
 
     torch.set_num_threads(1)
@@ -68,46 +142,89 @@ def agreement(run: Path, mem: Path, *, episodes: int = 3, deterministic: bool = 
     rule_schema = schema_for(k for e in entries for k in e.rule.requires if "/" in k)
     limit = scorer.threshold if threshold is None else float(threshold)
 
+    def judge(rule_frames: list[Any], mem_frames: list[Any], i: np.ndarray, j: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray]:
+        """(fired (P, n), matched (P, n)) of the stacks (frame i[k], frame j[k])."""
+        fired, matched = [], []
+        for a in range(0, len(i), BATCH):
+            pairs = list(zip(i[a:a + BATCH].tolist(), j[a:a + BATCH].tolist()))
+            rb = stack([(rule_frames[p], rule_frames[q]) for p, q in pairs], rule_schema)
+            fired.append(np.stack([np.asarray(call(e.rule, e.source, rb, "a policy's stacks"),
+                                              bool) for e in entries], axis=1))
+            mb = stack([(mem_frames[p], mem_frames[q]) for p, q in pairs], scorer.schema)
+            matched.append(scorer.distances(mb, texts) < limit)
+        return np.concatenate(fired), np.concatenate(matched)
+
     model = MaskablePPO.load(run / "model.zip", device="cpu")
     loops = cfg.episode_steps * STEP_MUL if cfg.episode_steps else None
     env = BuildMarinesGym(cfg.action_space, backend=cfg.backend, obs=cfg.obs_config(),
                           game_loops=loops)
+    pick = np.random.default_rng(AGREEMENT_SEED)
     n = len(ids)
-    tp, fp, fn = np.zeros(n, int), np.zeros(n, int), np.zeros(n, int)
-    fired_total = np.zeros(n, int)
-    stacks = null = null_clean = 0
+    fired_all: list[np.ndarray] = []
+    matched_all: list[np.ndarray] = []
+    kept_rule: list[Any] = []  # frames of the drawn transitions and support states
+    kept_mem: list[Any] = []
+    drawn: list[tuple[int, int]] = []
+    support: list[int] = []
     marines: list[int] = []
     try:
         for e in range(episodes):
+            rule_frames: list[Any] = []
+            mem_frames: list[Any] = []
             for info in play(model, env, AGREEMENT_SEED + e, deterministic):
-                frames = env.frames
-                if len(frames) < 2:
-                    continue
-                rb = stacks_of(frames, rule_schema)
-                fired = np.stack([np.asarray(call(e.rule, e.source, rb, "a policy's stacks"),
-                                             bool) for e in entries], axis=1)  # (B, n)
-                matched = scorer.distances(stacks_of(frames, scorer.schema), texts) < limit
-                tp += (fired & matched).sum(0)
-                fp += (~fired & matched).sum(0)
-                fn += (fired & ~matched).sum(0)
-                fired_total += fired.sum(0)
-                none = ~fired.any(1)
-                stacks += len(fired)
-                null += int(none.sum())
-                null_clean += int((none & ~matched.any(1)).sum())
+                new = env.frames if not rule_frames else env.frames[1:]
+                rule_frames += [rule_schema.extract(f) for f in new]
+                mem_frames += [scorer.schema.extract(f) for f in new]
             marines.append(int(info["marines"]))
+            steps = np.arange(len(rule_frames) - 1)
+            if not len(steps):
+                continue
+            fired, matched = judge(rule_frames, mem_frames, steps, steps + 1)
+            fired_all.append(fired)
+            matched_all.append(matched)
+            # This episode's share of the EPIC sample, its frames kept under new indices.
+            k = min(len(steps), -(-EPIC_TRANSITIONS // episodes))
+            m = min(len(rule_frames), -(-EPIC_SUPPORT // episodes))
+            ts = np.sort(pick.choice(steps, k, replace=False))
+            us = np.sort(pick.choice(len(rule_frames), m, replace=False))
+            need = sorted(set(ts.tolist()) | set((ts + 1).tolist()) | set(us.tolist()))
+            index = {f: len(kept_rule) + x for x, f in enumerate(need)}
+            kept_rule += [rule_frames[f] for f in need]
+            kept_mem += [mem_frames[f] for f in need]
+            drawn += [(index[t], index[t + 1]) for t in ts.tolist()]
+            support += [index[u] for u in us.tolist()]
     finally:
         env.close()
-    per = {i: {"text": t, "rule_fired": int(fired_total[k]), "mem_matched": int(tp[k] + fp[k]),
-               "tp": int(tp[k]), "fp": int(fp[k]), "fn": int(fn[k]),
-               "precision": _ratio(int(tp[k]), int(tp[k] + fp[k])),
-               "recall": _ratio(int(tp[k]), int(tp[k] + fn[k]))}
+    fired = np.concatenate(fired_all) if fired_all else np.zeros((0, n), bool)
+    matched = np.concatenate(matched_all) if matched_all else np.zeros((0, n), bool)
+    tp, fp, fn = ((fired & matched).sum(0), (~fired & matched).sum(0),
+                  (fired & ~matched).sum(0))
+    none = ~fired.any(1)
+
+    def both(i: np.ndarray, j: np.ndarray) -> np.ndarray:
+        f, m = judge(kept_rule, kept_mem, i, j)
+        return np.stack([f.sum(1), m.sum(1)], axis=1).astype(float)
+
+    epic = None
+    if drawn:
+        s, s2 = (np.array(x) for x in zip(*drawn))
+        epic = epic_distance(both, s, s2, np.array(support), cfg.gamma)
+    per = {i: {"text": t, "rule_fired": int(fired[:, k].sum()),
+               "mem_matched": int(tp[k] + fp[k]), "tp": int(tp[k]), "fp": int(fp[k]),
+               "fn": int(fn[k]), "precision": _ratio(int(tp[k]), int(tp[k] + fp[k])),
+               "recall": _ratio(int(tp[k]), int(tp[k] + fn[k])),
+               "f1": _f1(int(tp[k]), int(fp[k]), int(fn[k])),
+               "pearson": pearson(fired[:, k], matched[:, k])}
            for k, (i, t) in enumerate(zip(ids, texts))}
     result = {"run": str(run), "mem": str(mem), "episodes": episodes,
               "seeds": [AGREEMENT_SEED + e for e in range(episodes)],
-              "deterministic": deterministic, "threshold": limit, "stacks": stacks,
-              "marines": marines, "commands": per, "null_stacks": null,
-              "null_unmatched": _ratio(null_clean, null),
+              "deterministic": deterministic, "threshold": limit, "stacks": int(len(fired)),
+              "marines": marines, "commands": per, "null_stacks": int(none.sum()),
+              "null_unmatched": _ratio(int((none & ~matched.any(1)).sum()), int(none.sum())),
+              "reward": {"pearson": pearson(fired.sum(1), matched.sum(1)), "epic": epic,
+                         "gamma": cfg.gamma, "epic_transitions": len(drawn),
+                         "epic_support": len(support)},
               "config": cfg.identity()}
     path = out or run / "agreement.json"
     write_atomic(path, (json.dumps(result, indent=1) + "\n").encode())
@@ -115,17 +232,26 @@ def agreement(run: Path, mem: Path, *, episodes: int = 3, deterministic: bool = 
 
 
 def summary(result: dict[str, Any]) -> list[str]:
-    """A small table: per command, rule firings, MEM matches, precision and recall."""
+    """A small table: per command, rule firings, MEM matches, precision, recall and F1; then
+    the two rewards' correlation and EPIC distance."""
     def pct(x: float | None) -> str:
         return "—" if x is None else f"{100 * x:.1f}%"
+
+    def num(x: float | None) -> str:
+        return "—" if x is None else f"{x:.3f}"
 
     lines = [(f"{result['stacks']:,} stacks over {result['episodes']} episodes "
               f"(marines {result['marines']}), threshold {result['threshold']}"),
              (f"{'command':<20} {'rule fired':>10} {'MEM matched':>11} {'precision':>9} "
-              f"{'recall':>7}")]
+              f"{'recall':>7} {'F1':>7}")]
     for cid, c in result["commands"].items():
         lines.append(f"{cid:<20} {c['rule_fired']:>10,} {c['mem_matched']:>11,} "
-                     f"{pct(c['precision']):>9} {pct(c['recall']):>7}")
+                     f"{pct(c['precision']):>9} {pct(c['recall']):>7} {pct(c.get('f1')):>7}")
     lines.append(f"null stacks (no rule fires): {result['null_stacks']:,}, matched to no "
                  f"command by the MEM: {pct(result['null_unmatched'])}")
+    r = result.get("reward")
+    if r:
+        lines.append(f"narration vs rules reward: Pearson {num(r['pearson'])}, EPIC distance "
+                     f"{num(r['epic'])} (γ {r['gamma']}, {r['epic_transitions']} transitions, "
+                     f"D_S over {r['epic_support']} states)")
     return lines

@@ -6,7 +6,8 @@ one per pysc2 step; the arrays the worker processes wrote) and which games ended
 forms every game's two-frame stacks, judges them all in one batch (one MEM call for the
 narration reward) and returns each game's bonus. The bonuses are those of the per-game wrappers
 (:class:`~sc2data.rl.rewards.RuleShaping`, :class:`~sc2data.rl.rewards.NarrationShaping`) on the
-same frames, narration state included (tests/rl/test_vector.py holds this).
+same frames, narration state included, in both forms of payment (``event`` and
+``potential``, :data:`~sc2data.rl.rewards.SHAPINGS`; tests/rl/test_vector.py holds this).
 """
 
 from __future__ import annotations
@@ -38,13 +39,26 @@ def decision_stacks(frames: Mapping[str, np.ndarray], n_frames: np.ndarray, sche
     return StackBatch(arrays, schema), counts
 
 
+def potential_step(before: np.ndarray, after: np.ndarray, done: np.ndarray, gamma: float
+                   ) -> np.ndarray:
+    """Potential-based shaping for every game: ``γ·Φ(s') − Φ(s)``, ``Φ(s') = 0`` where the
+    episode ended (as :class:`~sc2data.rl.rewards._Shaping` pays it)."""
+    return gamma * np.where(np.asarray(done, dtype=bool), 0.0, after) - before
+
+
 class BatchedRules:
     """:class:`~sc2data.rl.rewards.RuleShaping` for all games: ``bonus`` per rule firing on
-    each stack of the decision."""
+    each stack of the decision, or (``shaping="potential"``) ``γ·Φ(s') − Φ(s)`` with
+    ``Φ = bonus · progress`` (:func:`~sc2data.rl.rewards.progress`) of the decision's first and
+    last frames."""
 
-    def __init__(self, *, bonus: float = 0.1, rule_ids: Sequence[str] | None = None) -> None:
+    def __init__(self, *, bonus: float = 0.1, rule_ids: Sequence[str] | None = None,
+                 shaping: str = "event", gamma: float = 0.99) -> None:
         from sc2data.labels.registry import load_registry
+        from sc2data.rl.rewards import check_shaping
 
+        check_shaping(shaping, gamma)
+        self.shaping, self.gamma = shaping, float(gamma)
         self.bonus = float(bonus)
         self.entries = list(load_registry().select(rule_ids))
         self.schema = schema_for(k for e in self.entries for k in e.rule.requires if "/" in k)
@@ -54,6 +68,14 @@ class BatchedRules:
 
     def __call__(self, frames: Mapping[str, np.ndarray], n_frames: np.ndarray,
                  done: np.ndarray) -> tuple[np.ndarray, list[dict[str, Any]]]:
+        if self.shaping == "potential":
+            from sc2data.rl.rewards import progress
+
+            score = frames["score_cumulative"]
+            last = np.asarray(n_frames, dtype=np.int64) - 1
+            before = self.bonus * progress(score[:, 0])
+            after = self.bonus * progress(score[np.arange(len(last)), last])
+            return potential_step(before, after, done, self.gamma), [{} for _ in last]
         batch, counts = decision_stacks(frames, n_frames, self.schema)
         from sc2data.labels.registry import call
 
@@ -71,10 +93,17 @@ class BatchedNarration:
     ``k`` advances (and pays ``bonus``) on the first of its stacks, in order, the MEM puts within
     ``threshold`` of it; ``patience`` > 0 skips a command not matched in that many decisions; a
     game that ends starts its narration again. Every stack is scored against every command of
-    the narration in one MEM call (the state embedding is the cost; the commands are cached)."""
+    the narration in one MEM call (the state embedding is the cost; the commands are cached).
+    ``shaping="potential"``: ``γ·Φ(s') − Φ(s)`` with ``Φ = bonus ·`` (commands each game has
+    matched this episode) instead of ``bonus`` per match."""
 
     def __init__(self, scorer: Any, narration: Narration, *, bonus: float = 1.0,
-                 threshold: float = 0.5, patience: int = 0) -> None:
+                 threshold: float = 0.5, patience: int = 0, shaping: str = "event",
+                 gamma: float = 0.99) -> None:
+        from sc2data.rl.rewards import check_shaping
+
+        check_shaping(shaping, gamma)
+        self.shaping, self.gamma = shaping, float(gamma)
         if not narration.commands:
             raise Sc2DataError("the narration holds no command")
         if patience < 0:
@@ -87,11 +116,13 @@ class BatchedNarration:
         scorer.embed_texts(self.commands)
         self.index = np.zeros(0, dtype=np.int64)
         self.waited = np.zeros(0, dtype=np.int64)
+        self.matched = np.zeros(0, dtype=np.int64)
 
     def reset(self, n: int) -> None:
         """A new vector of ``n`` games: every narration at its first command."""
         self.index = np.zeros(n, dtype=np.int64)
         self.waited = np.zeros(n, dtype=np.int64)
+        self.matched = np.zeros(n, dtype=np.int64)
 
     def __call__(self, frames: Mapping[str, np.ndarray], n_frames: np.ndarray,
                  done: np.ndarray) -> tuple[np.ndarray, list[dict[str, Any]]]:
@@ -100,24 +131,30 @@ class BatchedNarration:
         hit = (np.asarray(self.scorer.distances(batch, self.commands)) < self.threshold
                if len(batch) else np.zeros((0, m), dtype=bool))
         bonus = np.zeros(len(counts))
+        made = np.zeros(len(counts), dtype=np.int64)  # commands matched in this decision
         infos: list[dict[str, Any]] = []
         end = np.cumsum(counts)
         for i, n in enumerate(counts):
             mine = hit[end[i] - n:end[i]]
-            k, start, matched = int(self.index[i]), 0, False
+            k, start = int(self.index[i]), 0
             while start < n:
                 js = np.flatnonzero(mine[start:, k])
                 if not len(js):
                     break
                 bonus[i] += self.bonus
-                matched = True
+                made[i] += 1
                 k = (k + 1) % m
                 start += int(js[0]) + 1
-            waited = 0 if matched else int(self.waited[i]) + 1
+            waited = 0 if made[i] else int(self.waited[i]) + 1
             if self.patience and waited >= self.patience:
                 k, waited = (k + 1) % m, 0
             infos.append({"narration_index": k})
             self.index[i], self.waited[i] = (0, 0) if done[i] else (k, waited)
+        if self.shaping == "potential":
+            before = self.bonus * self.matched
+            after = self.bonus * (self.matched + made)
+            bonus = potential_step(before, after, done, self.gamma)
+        self.matched = np.where(np.asarray(done, dtype=bool), 0, self.matched + made)
         return bonus, infos
 
 
@@ -136,19 +173,23 @@ class BatchedZero:
 
 
 def make_shaping(reward: str, *, scorer: Any = None, narration: Narration | None = None,
-                 bonus: float | None = None, threshold: float = 0.5, patience: int = 0) -> Any:
-    """The batched shaping of ``reward`` (None for the game's sparse reward)."""
-    from sc2data.rl.rewards import REWARDS
+                 bonus: float | None = None, threshold: float = 0.5, patience: int = 0,
+                 shaping: str = "event", gamma: float = 0.99) -> Any:
+    """The batched shaping of ``reward`` (None for the game's sparse reward), its bonus paid as
+    ``shaping`` (:data:`~sc2data.rl.rewards.SHAPINGS`)."""
+    from sc2data.rl.rewards import REWARDS, check_shaping
 
+    check_shaping(shaping, gamma)
     if reward == "sparse":
         return None
     if reward == "zero":
         return BatchedZero()
     if reward == "rules":
-        return BatchedRules(bonus=0.1 if bonus is None else bonus)
+        return BatchedRules(bonus=0.1 if bonus is None else bonus, shaping=shaping, gamma=gamma)
     if reward == "narration":
         if scorer is None or narration is None:
             raise Sc2DataError("the narration reward needs a MEM run (--mem) and a narration")
         return BatchedNarration(scorer, narration, bonus=1.0 if bonus is None else bonus,
-                                threshold=threshold, patience=patience)
+                                threshold=threshold, patience=patience, shaping=shaping,
+                                gamma=gamma)
     raise Sc2DataError(f"unknown reward {reward!r}; choose one of: {', '.join(REWARDS)}")

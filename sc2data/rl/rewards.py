@@ -8,6 +8,17 @@ event in any pysc2 step of a multi-step macro is seen, once.
 
 Every wrapper leaves ``info["game_reward"]`` (the game's own reward: +1 per marine) untouched
 and adds ``info["shaping"]`` (what it added), so agents trained on any reward are scored alike.
+
+Shaping (``shaping``, :data:`SHAPINGS`) is paid in one of two forms:
+
+* ``event`` — ``bonus`` each time an event fires (a rule, a narration command matched). An
+  event that can be made to fire again and again (a loop) can be farmed.
+* ``potential`` — potential-based shaping (Ng, Harada & Russell 1999): each decision pays
+  ``F = γ·Φ(s') − Φ(s)`` for a potential Φ of the state, with ``Φ = 0`` once the episode has
+  ended (the game's timer: a terminal state). Along any episode the discounted sum of F
+  telescopes to ``−Φ(s_0)``, the same for every policy, so the optimal policy is the game's
+  own and no loop earns anything; the bonus only tells the value function early where
+  progress lies. γ is the run's ``gamma``. What Φ is for each reward is in its class.
 """
 
 from __future__ import annotations
@@ -18,6 +29,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from sc2data._pysc2 import features
 from sc2data.errors import Sc2DataError
 from sc2data.rl.narration import Narration, check_readable
 from sc2data.rulebase import Rule, schema_for, stack
@@ -25,6 +37,39 @@ from sc2data.schema import Schema, StackBatch
 
 REWARDS: tuple[str, ...] = ("sparse", "rules", "narration", "zero")
 """``zero`` is a control: no reward at all, to see what PPO's updates do with no signal."""
+
+SHAPINGS: tuple[str, ...] = ("event", "potential")
+"""How the rules and narration rewards pay their bonus (see the module docstring)."""
+
+_SCORE = features.ScoreCumulative
+VALUE_UNIT = 50
+"""Minerals of an SCV (and of a marine): the unit of :func:`progress`."""
+
+
+def progress(score_cumulative: np.ndarray) -> np.ndarray:
+    """The rules reward's potential per unit of ``bonus``, from pysc2's ``score_cumulative``
+    vector (last axis): the minerals' worth of the units and structures the player has made, in
+    SCVs (``(total_value_units + total_value_structures) / 50``), plus the marines made
+    (``score``). An SCV adds 1, a supply depot 2, a barracks 3 (at placement, as the rules see
+    a footprint appear), a marine 2 (its value and the score).
+
+    Why this potential: it is a function of the state that the labelling rules' own inputs
+    show (the score vector ``build_scv`` and ``train_marine`` read; the footprints the depot and
+    barracks rules see are in the structures' value), so it rewards exactly the build order the
+    rules reward, and it grows only by building — time passing, mining and selecting (the
+    ``collect_minerals`` rule) leave it unchanged. A count of rule
+    firings would depend on the history, not the state."""
+    s = np.asarray(score_cumulative, dtype=np.float64)
+    return ((s[..., _SCORE.total_value_units] + s[..., _SCORE.total_value_structures])
+            / VALUE_UNIT + s[..., _SCORE.score])
+
+
+def check_shaping(shaping: str, gamma: float) -> None:
+    """One-line error unless ``shaping`` is one of :data:`SHAPINGS` and γ lies in [0, 1]."""
+    if shaping not in SHAPINGS:
+        raise Sc2DataError(f"unknown shaping {shaping!r}; choose one of: {', '.join(SHAPINGS)}")
+    if not 0.0 <= gamma <= 1.0:
+        raise Sc2DataError(f"gamma must lie in [0, 1], got {gamma}")
 
 
 def stacks_of(frames: Sequence[Mapping[str, Any]], schema: Schema) -> StackBatch:
@@ -34,7 +79,11 @@ def stacks_of(frames: Sequence[Mapping[str, Any]], schema: Schema) -> StackBatch
 
 
 class _Shaping(gym.Wrapper):  # type: ignore[type-arg]
-    """Common part: masks pass through; ``shape`` says what to add to the game's reward."""
+    """Common part: masks pass through; ``shape`` says what to add to the game's reward (an
+    event bonus), ``potential`` what Φ is (potential-based shaping, ``shaping="potential"``)."""
+
+    shaping = "event"
+    gamma = 0.99
 
     def action_masks(self) -> np.ndarray:
         return self.env.unwrapped.action_masks()  # type: ignore[attr-defined, no-any-return]
@@ -42,13 +91,24 @@ class _Shaping(gym.Wrapper):  # type: ignore[type-arg]
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
         obs, reward, terminated, truncated, info = self.env.step(action)
         game = float(info.get("game_reward", reward))
-        extra = self.shape(self.env.unwrapped.frames)  # type: ignore[attr-defined]
+        frames = self.env.unwrapped.frames  # type: ignore[attr-defined]
+        if self.shaping == "potential":
+            before = self.potential(frames[0])
+            self.shape(frames)  # advances what the potential reads (the narration's progress)
+            after = 0.0 if terminated or truncated else self.potential(frames[-1])
+            extra = self.gamma * after - before
+        else:
+            extra = self.shape(frames)
         info = {**info, "game_reward": game, "shaping": extra}
         return obs, game + extra, terminated, truncated, info
 
     def shape(self, frames: Sequence[Mapping[str, Any]]) -> float:
         """The bonus for the decision whose pysc2 observations are ``frames`` (the decision's
         first frame is the previous decision's last); each reward mode defines it."""
+        raise NotImplementedError
+
+    def potential(self, frame: Mapping[str, Any]) -> float:
+        """Φ of the state whose pysc2 observation is ``frame`` (potential-based shaping)."""
         raise NotImplementedError
 
 
@@ -78,13 +138,19 @@ class RuleShaping(_Shaping):
     are the ``rules/`` plugins (build an SCV, collect minerals, build a supply depot, build a
     barracks, train a marine), loaded through ``sc2data.labels.registry.load_registry``;
     ``rule_ids`` picks some of them.
+
+    ``shaping="potential"``: ``r = r_game + γ·Φ(s') − Φ(s)`` with ``Φ = bonus · progress(s)``
+    (:func:`progress`: what the player has built, in SCVs' worth, plus marines made).
     """
 
     def __init__(self, env: gym.Env, *, bonus: float = 0.1,  # type: ignore[type-arg]
-                 rule_ids: Sequence[str] | None = None) -> None:
+                 rule_ids: Sequence[str] | None = None, shaping: str = "event",
+                 gamma: float = 0.99) -> None:
         super().__init__(env)
         from sc2data.labels.registry import load_registry
 
+        check_shaping(shaping, gamma)
+        self.shaping, self.gamma = shaping, float(gamma)
         self.bonus = float(bonus)
         self.entries = list(load_registry().select(rule_ids))
         self.rules: list[Rule] = [e.rule for e in self.entries]
@@ -93,10 +159,15 @@ class RuleShaping(_Shaping):
     def shape(self, frames: Sequence[Mapping[str, Any]]) -> float:
         from sc2data.labels.registry import call
 
+        if self.shaping == "potential":
+            return 0.0  # paid through the potential alone
         batch = stacks_of(frames, self.schema)
         fired = sum(int(np.count_nonzero(call(e.rule, e.source, batch, "an RL decision's stacks")))
                     for e in self.entries)
         return self.bonus * fired
+
+    def potential(self, frame: Mapping[str, Any]) -> float:
+        return self.bonus * float(progress(frame["score_cumulative"]))
 
 
 class NarrationShaping(_Shaping):
@@ -115,11 +186,18 @@ class NarrationShaping(_Shaping):
     with the same ``distance(stacks, text) -> (B,) array`` method and a ``schema``. The command
     embeddings are computed once, at construction (the scorer caches them per text).
     ``info["narration_index"]`` is k after the decision.
+
+    ``shaping="potential"``: ``r = r_game + γ·Φ(s') − Φ(s)`` with ``Φ = bonus ·`` (commands
+    matched so far this episode, a skipped one not counted): each match is worth ``γ·bonus``
+    when made and is paid back by the time the episode ends, so matching early is what pays.
     """
 
     def __init__(self, env: gym.Env, scorer: Any, narration: Narration, *,  # type: ignore[type-arg]
-                 bonus: float = 1.0, threshold: float = 0.5, patience: int = 0) -> None:
+                 bonus: float = 1.0, threshold: float = 0.5, patience: int = 0,
+                 shaping: str = "event", gamma: float = 0.99) -> None:
         super().__init__(env)
+        check_shaping(shaping, gamma)
+        self.shaping, self.gamma = shaping, float(gamma)
         if not narration.commands:
             raise Sc2DataError("the narration holds no command")
         if patience < 0:
@@ -132,9 +210,11 @@ class NarrationShaping(_Shaping):
             scorer.embed_texts(list(narration.commands))  # encode each command once, now
         self.index = 0
         self._waited = 0
+        self.matched = 0
+        """Commands matched this episode (the potential's count)."""
 
     def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
-        self.index, self._waited = 0, 0
+        self.index, self._waited, self.matched = 0, 0, 0
         obs, info = self.env.reset(**kwargs)
         return obs, {**info, "narration_index": 0}
 
@@ -154,6 +234,7 @@ class NarrationShaping(_Shaping):
                 break
             extra += self.bonus
             matched = True
+            self.matched += 1
             self.index = (self.index + 1) % len(self.narration)
             start += int(hits[0]) + 1
         self._waited = 0 if matched else self._waited + 1
@@ -162,20 +243,28 @@ class NarrationShaping(_Shaping):
             self._waited = 0
         return extra
 
+    def potential(self, frame: Mapping[str, Any]) -> float:
+        return self.bonus * self.matched
+
 
 def wrap_reward(env: gym.Env, reward: str, *, scorer: Any = None,  # type: ignore[type-arg]
                 narration: Narration | None = None, bonus: float | None = None,
-                threshold: float = 0.5, patience: int = 0) -> gym.Env:  # type: ignore[type-arg]
-    """``env`` under the reward wrapper named ``reward`` (one of :data:`REWARDS`)."""
+                threshold: float = 0.5, patience: int = 0, shaping: str = "event",
+                gamma: float = 0.99) -> gym.Env:  # type: ignore[type-arg]
+    """``env`` under the reward wrapper named ``reward`` (one of :data:`REWARDS`), its bonus
+    paid as ``shaping`` (:data:`SHAPINGS`; γ for the potential-based form)."""
+    check_shaping(shaping, gamma)
     if reward == "sparse":
         return SparseReward(env)
     if reward == "zero":
         return ZeroReward(env)
     if reward == "rules":
-        return RuleShaping(env, bonus=0.1 if bonus is None else bonus)
+        return RuleShaping(env, bonus=0.1 if bonus is None else bonus, shaping=shaping,
+                           gamma=gamma)
     if reward == "narration":
         if scorer is None or narration is None:
             raise Sc2DataError("the narration reward needs a MEM run (--mem) and a narration")
         return NarrationShaping(env, scorer, narration, bonus=1.0 if bonus is None else bonus,
-                                threshold=threshold, patience=patience)
+                                threshold=threshold, patience=patience, shaping=shaping,
+                                gamma=gamma)
     raise Sc2DataError(f"unknown reward {reward!r}; choose one of: {', '.join(REWARDS)}")

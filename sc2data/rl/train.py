@@ -1,4 +1,4 @@
-"""Train, evaluate and plot MaskablePPO agents on BuildMarines with a chosen reward.
+"""Train MaskablePPO agents on BuildMarines with a chosen reward.
 
 A run folder (``--out RUN``) holds:
 
@@ -8,14 +8,14 @@ A run folder (``--out RUN``) holds:
 * ``curve.csv`` / ``curve.json`` — one row per finished training episode: the env, SB3's
   timestep count (decisions over all envs) and the pysc2 steps over all envs when it ended, the
   marines made (the game's score), the game's return and the shaped return;
-* ``eval.json`` / ``eval-stochastic.json`` — written by :func:`evaluate` (the most likely action
-  / actions sampled from the policy).
+* ``eval.json`` — sampled and argmax play on the evaluation episodes, written by
+  :func:`sc2data.rl.evaluate.evaluate`.
 
 Resuming: rerunning the same command (the same settings; a larger ``--steps`` is allowed)
 continues from ``model.zip``; episodes running at the interruption are lost, and the resumed
 part's environments are seeded ``seed + 1000·resumes + i`` so that no episode repeats.
 Training seeds env i with ``seed + i`` (then ``+ 1000`` per resume); evaluation episodes use
-seeds ``EVAL_SEED + e``, a range training never uses while ``seed < 900,000``.
+seeds from ``EVAL_SEED`` on, a range training never uses while ``seed < 900,000``.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ import math
 import os
 import shutil
 import typing
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -72,6 +72,9 @@ class RLConfig:
     """Shaping bonus per rule firing (rules, default 0.1) or per matched command (narration, 1)."""
     threshold: float = 0.5
     patience: int = 0
+    shaping: str = "event"
+    """How the rules and narration rewards pay their bonus: ``event`` (each firing or match) or
+    ``potential`` (γ·Φ(s') − Φ(s) with the run's ``gamma``; :mod:`sc2data.rl.rewards`)."""
     episode_steps: int | None = None
     """pysc2 steps per episode (simulator only); None: the map's 1,800."""
     rollout: int = 64
@@ -121,7 +124,7 @@ class RLConfig:
     LEGACY: typing.ClassVar[dict[str, Any]] = {
         "obs": "stored", "obs_size": 64, "minimap": False, "policy": "independent", "gamma": 0.99,
         "gae_lambda": 0.95, "epochs": 4, "ent_coef": 0.01, "normalize_advantage": True,
-        "target_kl": None, "smdp": False}
+        "target_kl": None, "smdp": False, "shaping": "event"}
     """Settings added since runs were first written, as those runs had them: a run folder whose
     ``config.json`` lacks one was trained so."""
 
@@ -189,6 +192,12 @@ def check_values(cfg: RLConfig) -> None:
         raise Sc2DataError("--ent-coef must be a finite number, 0 or more")
     if cfg.target_kl is not None and not 0.0 < cfg.target_kl < float("inf"):
         raise Sc2DataError("--target-kl must be a positive finite number")
+    from sc2data.rl.rewards import SHAPINGS
+
+    if cfg.shaping not in SHAPINGS:
+        raise Sc2DataError(f"unknown shaping {cfg.shaping!r}; choose one of: {', '.join(SHAPINGS)}")
+    if cfg.shaping != "event" and cfg.reward not in ("rules", "narration"):
+        raise Sc2DataError(f"--shaping {cfg.shaping} goes with --reward rules or narration")
 
 
 DEVICES: tuple[str, ...] = ("auto", "cpu", "cuda")
@@ -228,7 +237,7 @@ def check_config(cfg: RLConfig) -> tuple[Any, Any]:
     from sc2data.rl.narration import check_readable, load_narration
 
     narration = load_narration(cfg.narration)
-    scorer = load_model(cfg.mem, device=resolve_device(cfg.device))
+    scorer = load_model(cfg.mem, device=resolve_device(cfg.device), threads=None)  # the learner's
     check_readable(narration, scorer)
     return narration, scorer
 
@@ -244,7 +253,8 @@ def make_env(cfg: RLConfig, scorer: Any = None, narration: Any = None) -> Any:
     if cfg.reward == "narration" and scorer is None:
         narration, scorer = check_config(cfg)
     return wrap_reward(env, cfg.reward, scorer=scorer, narration=narration, bonus=cfg.bonus,
-                       threshold=cfg.threshold, patience=cfg.patience)
+                       threshold=cfg.threshold, patience=cfg.patience, shaping=cfg.shaping,
+                       gamma=cfg.gamma)
 
 
 def game_loops(cfg: RLConfig) -> int | None:
@@ -263,7 +273,8 @@ def make_vec_env(cfg: RLConfig, scorer: Any = None, narration: Any = None) -> An
     if cfg.reward == "narration" and scorer is None:
         narration, scorer = check_config(cfg)
     shaping = make_shaping(cfg.reward, scorer=scorer, narration=narration, bonus=cfg.bonus,
-                           threshold=cfg.threshold, patience=cfg.patience)
+                           threshold=cfg.threshold, patience=cfg.patience, shaping=cfg.shaping,
+                           gamma=cfg.gamma)
     game = GameConfig(cfg.action_space, cfg.backend, cfg.obs_config(), game_loops(cfg))
     return BuildMarinesVecEnv(game, cfg.envs, processes=cfg.processes, shaping=shaping)
 
@@ -354,7 +365,7 @@ def train(cfg: RLConfig) -> Path:
     if run.is_dir() and any(run.iterdir()) and not (run / runs.CONFIG).is_file():
         raise Sc2DataError(f"{run} exists and is not an sc2data rl run; pick another --out")
     made = not run.exists()
-    begun = (run / runs.STATE).is_file()
+    begun = (run / runs.CONFIG).is_file()  # an existing run: never forgotten on failure
     run.mkdir(parents=True, exist_ok=True)
     try:
         with FolderLock(run, "rl train"), writing(f"the run {run}", "free some space, then "
@@ -362,7 +373,7 @@ def train(cfg: RLConfig) -> Path:
             return _train_locked(cfg, run, narration, scorer)
     except BaseException:
         if not begun and not (run / runs.STATE).is_file():
-            _forget(run, whole=made)  # no checkpoint yet: the rerun starts it afresh
+            _forget(run, whole=made)  # a new run with no checkpoint yet: the rerun starts afresh
         raise
 
 
@@ -509,10 +520,12 @@ def summary_line(run: Path, seconds: float | None = None) -> str:
 
 
 def load_config(run: Path) -> RLConfig:
-    """The settings of a trained run (its ``config.json``)."""
+    """The settings of a trained run (its ``config.json``), its checkpoint checked by content
+    (every reader of a run's model opens it through here)."""
     if not (run / "config.json").is_file() or not (run / "model.zip").is_file():
         raise Sc2DataError(f"{run} is not a trained sc2data rl run (no config.json and "
                            f"model.zip); train one with sc2data rl train --out {run}")
+    runs.read_state(run)  # the model (and curve) must be what the last checkpoint recorded
     data = read_config(run)
     cfg = RLConfig(out=str(run), **{k: data[k] for k in CONFIG_SHAPE})
     try:
@@ -522,125 +535,14 @@ def load_config(run: Path) -> RLConfig:
     return cfg
 
 
-def evaluate(run: Path, episodes: int = 10, deterministic: bool = True,
-             progress: bool | None = None) -> dict[str, Any]:
-    """Play ``episodes`` seeded episodes (seeds ``EVAL_SEED + e``) with the trained policy and
-    the action masks; score each by the game's own reward (marines made). Writes ``eval.json``
-    (``eval-stochastic.json`` when actions are sampled, so the two never overwrite each other)."""
-    require_rl("sc2data rl evaluate")
-    if episodes < 1:
-        raise Sc2DataError("--episodes must be at least 1")
-    cfg = load_config(run)
-    state = runs.read_state(run) or {}
-    import torch
-    from sb3_contrib import MaskablePPO
-
-    from sc2data.progress import bar
-    from sc2data.rl.envs import BuildMarinesGym
-
-    torch.set_num_threads(1)
-    model = MaskablePPO.load(run / "model.zip", device="cpu")
-    env = BuildMarinesGym(cfg.action_space, backend=cfg.backend, obs=cfg.obs_config(),
-                          game_loops=game_loops(cfg))
-    marines: list[int] = []
-    with bar(episodes, desc="rl evaluate", unit="episode", show=progress) as b:
-        for e in range(episodes):
-            for info in play(model, env, EVAL_SEED + e, deterministic):
-                pass
-            marines.append(int(info["marines"]))
-            b.update(1)
-    env.close()
-    result = {"episodes": episodes, "seeds": [EVAL_SEED + e for e in range(episodes)],
-              "marines": marines, "mean": float(np.mean(marines)),
-              "std": float(np.std(marines)), "deterministic": deterministic,
-              "trained_timesteps": state.get("timesteps"), "trained_env_steps":
-              state.get("env_steps"), "config": cfg.identity()}
-    _write_json(run / ("eval.json" if deterministic else "eval-stochastic.json"), result)
-    return result
+_MOVED = ("evaluate", "play", "plot", "seed_band", "summary")
 
 
-def play(model: Any, env: Any, seed: int, deterministic: bool) -> Iterator[dict[str, Any]]:
-    """One seeded episode of ``model``'s masked policy on ``env``: the info of each decision
-    (``env.frames`` then holds that decision's pysc2 observations)."""
-    obs, _ = env.reset(seed=seed)
-    done = False
-    while not done:
-        action, _ = model.predict(obs, deterministic=deterministic,
-                                  action_masks=env.action_masks())
-        obs, _, terminated, truncated, info = env.step(action)
-        done = terminated or truncated
-        yield info
+def __getattr__(name: str) -> Any:
+    """Evaluation and plotting live in :mod:`sc2data.rl.evaluate`; their names still import from
+    here (``from sc2data.rl.train import play``)."""
+    if name in _MOVED:
+        import importlib
 
-
-def _label(cfg: dict[str, Any]) -> str:
-    """``space, reward`` of a run's config, and its narration file's name where not the default."""
-    label = f"{cfg.get('action_space')}, {cfg.get('reward')}"
-    return label + (f" ({Path(cfg['narration']).stem})" if cfg.get("narration") else "")
-
-
-def seed_band(curves: Sequence[tuple[np.ndarray, np.ndarray]]
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """``(x, mean, min, max)`` of several runs' ``(x, y)`` curves over the points all of them
-    reached (episode by episode; x is the runs' mean there)."""
-    n = min(len(x) for x, _ in curves)
-    xs = np.mean([x[:n] for x, _ in curves], axis=0)
-    ys = np.array([y[:n] for _, y in curves])
-    return xs, ys.mean(axis=0), ys.min(axis=0), ys.max(axis=0)
-
-
-def plot(runs: Sequence[Path], out: Path, window: int = 10, group: bool = False) -> Path:
-    """Marines per training episode against pysc2 steps: one line (rolling mean) per run, or
-    with ``group`` one per action space, reward and narration, the mean of its runs' rolling
-    means over the episodes all of them reached, shaded from the lowest run to the highest."""
-    curves = []
-    for run in runs:
-        if not (run / "config.json").is_file():
-            raise Sc2DataError(f"{run} is not an sc2data rl run (no config.json)")
-        rows = read_curve(run)
-        if not rows:
-            raise Sc2DataError(f"{run} has no finished training episode to plot yet")
-        curves.append((run, read_config(run), rows))
-    if window < 1:
-        raise Sc2DataError("--window must be at least 1")
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7, 4.2))
-    groups: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
-    for run, cfg, rows in curves:
-        x = np.array([r["env_steps"] for r in rows], dtype=float)
-        y = np.array([r["marines"] for r in rows], dtype=float)
-        w = min(window, len(y))
-        smooth = np.convolve(y, np.ones(w) / w, mode="valid")
-        if group:
-            groups.setdefault(_label(cfg), []).append((x[w - 1:], smooth))
-            continue
-        line, = ax.plot(x[w - 1:], smooth, label=f"{run.name} ({_label(cfg)})")
-        ax.scatter(x, y, s=6, alpha=0.3, color=line.get_color())
-    for label, members in groups.items():
-        xs, mean, lo, hi = seed_band(members)
-        runs_word = "run" if len(members) == 1 else "runs"
-        line, = ax.plot(xs, mean, label=f"{label}: mean of {len(members)} {runs_word}")
-        if len(members) > 1:
-            ax.fill_between(xs, lo, hi, alpha=0.15, color=line.get_color())
-    ax.set_xlabel("pysc2 steps (all envs)")
-    ax.set_ylabel(f"marines per episode (mean of {window})")
-    ax.set_title("BuildMarines, MaskablePPO: game score while training")
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=120)
-    plt.close(fig)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    write_atomic(out, buf.getvalue())
-    return out
-
-
-def summary(result: dict[str, Any]) -> str:
-    """One line: marines per episode, mean ± std over the evaluation episodes."""
-    return (f"marines per episode: {result['mean']:.2f} ± {result['std']:.2f} over "
-            f"{result['episodes']} episodes (seeds {EVAL_SEED}…{EVAL_SEED + result['episodes'] - 1})")
-
+        return getattr(importlib.import_module("sc2data.rl.evaluate"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -46,27 +46,42 @@ def test_train_resume_evaluate_plot(tmp_path: Path, capsys: pytest.CaptureFixtur
 
     code, out, err = run_cli(["rl", "evaluate", run, "--episodes", "2", "--no-progress"], capsys)
     assert code == 0, err
-    assert "marines per episode" in out
+    assert "sampled: marines per episode" in out and "argmax: marines per episode" in out
+    assert "1 west, 1 east" in out
     result = json.loads((run / "eval.json").read_text())
-    assert result["episodes"] == 2 and result["seeds"] == [1_000_000, 1_000_001]
-    assert len(result["marines"]) == 2 and result["deterministic"]
-    # Sampled actions report beside the deterministic one, never over it.
-    code, out, err = run_cli(["rl", "evaluate", run, "--episodes", "1", "--stochastic",
-                              "--no-progress"], capsys)
+    assert result["episodes"] == 2 and result["sides"] == ["west", "east"]
+    assert all(s >= 1_000_000 for s in result["seeds"]) and result["trained_timesteps"] == 160
+    for mode in ("sampled", "argmax"):
+        assert len(result[mode]["marines"]) == 2
+        assert result[mode]["mean"] == sum(result[mode]["marines"]) / 2
+    # Sampled play is seeded per episode: the same figures again; one file holds both.
+    code, out, err = run_cli(["rl", "evaluate", run, "--episodes", "2", "--no-progress"], capsys)
     assert code == 0, err
-    sampled = json.loads((run / "eval-stochastic.json").read_text())
-    assert not sampled["deterministic"] and sampled["episodes"] == 1
     assert json.loads((run / "eval.json").read_text()) == result
+    assert not (run / "eval-stochastic.json").exists()
 
     png = tmp_path / "curves.png"
-    code, out, err = run_cli(["rl", "plot", run, run, "--out", png], capsys)
+    code, out, err = run_cli(["rl", "plot", run, run, "--window", "1000", "--out", png], capsys)
     assert code == 0, err
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # Fewer episodes than the window: drawn as points, and said so.
+    assert out.count("fewer than --window 1000: drawn as points") == 2
+    code, out, err = run_cli(["rl", "plot", run, "--window", "2", "--out", png], capsys)
+    assert code == 0 and "fewer than" not in out
     grouped = tmp_path / "grouped.png"
-    code, out, err = run_cli(["rl", "plot", run, run, "--group", "--out", grouped], capsys)
+    code, out, err = run_cli(["rl", "plot", run, run, "--group", "--window", "1000", "--out",
+                              grouped], capsys)
     assert code == 0, err
     assert grouped.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "drawn as points" in out
     assert grouped.read_bytes() != png.read_bytes()  # one mean line, not two run lines
+
+    # One run is a group of one: compare reports its IQM and curve.
+    code, out, err = run_cli(["rl", "compare", run, "--reps", "50", "--out", tmp_path / "c"],
+                             capsys)
+    assert code == 0, err
+    assert "macro, sparse: 1 run, sampled IQM" in out
+    assert (tmp_path / "c" / "compare.png").is_file()
 
 
 def test_narration_training_with_a_tiny_mem(mem_run: Path, tmp_path: Path,
@@ -102,6 +117,8 @@ def test_narration_training_with_a_tiny_mem(mem_run: Path, tmp_path: Path,
     (["--normalize-advantage", "--batch-size", "1"], ("--normalize-advantage",)),
     (["--patience", "-1"], ("--patience",)),
     (["--mem", "x"], ("--reward narration",)),
+    (["--shaping", "dense"], ("unknown shaping", "potential")),
+    (["--shaping", "potential"], ("--shaping potential", "--reward rules or narration")),
 ])
 def test_bad_input_is_one_line_and_writes_nothing(
         args: list[str], needles: tuple[str, ...], tmp_path: Path,
@@ -175,7 +192,10 @@ def test_agreement_counts_add_up_and_follow_the_threshold(
 def test_seed_band_spans_the_episodes_every_run_reached() -> None:
     import numpy as np
 
-    from sc2data.rl.train import seed_band
+    from sc2data.rl import train
+    from sc2data.rl.evaluate import play, seed_band
+
+    assert train.seed_band is seed_band and train.play is play  # the old names still import
 
     a = (np.array([10.0, 20.0, 30.0]), np.array([1.0, 4.0, 9.0]))
     b = (np.array([12.0, 22.0]), np.array([3.0, 2.0]))

@@ -162,3 +162,66 @@ def test_narration_files(tmp_path: Any) -> None:
             load_narration(tmp_path / name)
     with pytest.raises(Sc2DataError, match="does not exist"):
         load_narration(tmp_path / "absent.toml")
+
+
+# -- potential-based shaping ------------------------------------------------------------------
+
+def built(units: int, structures: int = 400, marines: int = 0, idle: int = 0
+          ) -> dict[str, np.ndarray]:
+    """A frame of a player with ``units``/``structures`` minerals' worth built, ``marines``
+    made and ``idle`` idle workers."""
+    return frame(score_cumulative__total_value_units=units,
+                 score_cumulative__total_value_structures=structures,
+                 score_cumulative__score=marines, player__idle_worker_count=idle)
+
+
+def discounted(rewards: Sequence[float], gamma: float) -> float:
+    return sum(gamma ** t * r for t, r in enumerate(rewards))
+
+
+def test_rules_potential_is_what_was_built_and_telescopes() -> None:
+    # Φ = bonus · ((units + structures) / 50 + marines): 20 at the start (a CC, 12 SCVs),
+    # 21 with an SCV more, 24 with a barracks placed, 26 with a marine (its value and score).
+    start = built(600)
+    decisions = [([built(650)], 0.0), ([built(650, 550)], 0.0), ([built(700, 550, 1)], 1.0)]
+    env = RuleShaping(ScriptedEnv(start, decisions), bonus=0.5, shaping="potential", gamma=0.9)
+    env.reset()
+    got = [env.step(0) for _ in decisions]
+    shaping = [g[4]["shaping"] for g in got]
+    assert shaping == pytest.approx([0.9 * 10.5 - 10.0, 0.9 * 12.0 - 10.5, 0.0 - 12.0])
+    assert [g[1] for g in got] == pytest.approx([s + g for s, g in zip(shaping, (0, 0, 1))])
+    # The episode's discounted shaping is -Φ(s_0) whatever was built: nothing to farm.
+    assert discounted(shaping, 0.9) == pytest.approx(-10.0)
+
+
+def test_a_rules_loop_pays_as_an_event_and_not_as_a_potential() -> None:
+    # Sending an idle worker back to mine, again and again: collect_minerals fires each time.
+    loop = [([built(600, idle=1)], 0.0), ([built(600, idle=0)], 0.0)] * 3
+    event = RuleShaping(ScriptedEnv(built(600, idle=1), loop), bonus=0.5)
+    event.reset()
+    assert sum(event.step(0)[4]["shaping"] for _ in loop) == pytest.approx(1.5)
+    potential = RuleShaping(ScriptedEnv(built(600, idle=1), loop), bonus=0.5,
+                            shaping="potential", gamma=1.0)
+    potential.reset()
+    assert [potential.step(0)[4]["shaping"] for _ in loop] == [0.0] * 5 + [-10.0]
+
+
+def test_narration_potential_counts_commands_matched_this_episode() -> None:
+    narration = Narration(("one", "two"), "test")
+    decisions = [([m(1)], 0.0), ([m(0)], 0.0), ([m(2), m(1)], 0.0), ([m(0)], 0.0)]
+    env = NarrationShaping(ScriptedEnv(m(0), decisions), FakeScorer(), narration, bonus=1.0,
+                           shaping="potential", gamma=0.5)
+    env.reset()
+    shaping = [env.step(0)[4]["shaping"] for _ in decisions]
+    # Φ: 0 → 1 → 1 → 3 (two matches in one decision) → 0 at the end
+    assert shaping == pytest.approx([0.5 * 1 - 0, 0.5 * 1 - 1, 0.5 * 3 - 1, 0.0 - 3])
+    assert discounted(shaping, 0.5) == pytest.approx(0.0)
+    env.reset()
+    assert env.matched == 0 and env.step(0)[4]["shaping"] == pytest.approx(0.5)
+
+
+def test_unknown_shaping_is_an_error() -> None:
+    with pytest.raises(Sc2DataError, match="unknown shaping"):
+        wrap_reward(ScriptedEnv(m(0), []), "rules", shaping="difference")
+    with pytest.raises(Sc2DataError, match="gamma"):
+        RuleShaping(ScriptedEnv(m(0), []), shaping="potential", gamma=1.5)

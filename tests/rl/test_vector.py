@@ -42,22 +42,25 @@ def _masked_actions(masks: np.ndarray, space: str, rng: np.random.Generator) -> 
                      for m in masks])
 
 
-@pytest.mark.parametrize("space, reward, processes", [
-    ("macro", "sparse", 0), ("paper", "rules", 2), ("macro", "narration", 2),
-    ("paper", "narration", 0)])
+@pytest.mark.parametrize("space, reward, processes, shaping", [
+    ("macro", "sparse", 0, "event"), ("paper", "rules", 2, "event"),
+    ("macro", "narration", 2, "event"), ("paper", "narration", 0, "event"),
+    ("macro", "rules", 2, "potential"), ("paper", "narration", 0, "potential")])
 def test_same_games_and_rewards_as_the_per_game_wrappers(
-        space: str, reward: str, processes: int, mem_run: Path) -> None:
-    """Observations, masks, rewards (the bonus included), ends and infos equal those of
-    DummyVecEnv over the per-game reward wrappers, step by step on the same seeds."""
+        space: str, reward: str, processes: int, shaping: str, mem_run: Path) -> None:
+    """Observations, masks, rewards (the bonus included, as an event or a potential), ends and
+    infos equal those of DummyVecEnv over the per-game reward wrappers, step by step on the
+    same seeds."""
     mem = str(mem_run) if reward == "narration" else None
     cfg = RLConfig(out="unused", action_space=space, reward=reward, episode_steps=STEPS,
                    mem=mem, threshold=2.0 if mem else 0.5, envs=3, processes=processes,
-                   obs="stored" if space == "paper" else "compact")
+                   obs="stored" if space == "paper" else "compact", shaping=shaping,
+                   gamma=0.97)
     narration, scorer = check_config(cfg)
     old = DummyVecEnv([lambda: make_env(cfg, scorer, narration) for _ in range(3)])
     new = make_vec_env(cfg, scorer, narration)
     rng = np.random.default_rng(0)
-    bonuses = 0.0
+    bonuses, paid = 0.0, 0
     try:
         old.seed(7)
         new.seed(7)
@@ -79,11 +82,14 @@ def test_same_games_and_rewards_as_the_per_game_wrappers(
                     assert all((x["terminal_observation"][k] == y["terminal_observation"][k])
                                .all() for k in a)
             bonuses += float(sum(i["shaping"] for i in ib))
+            paid += sum(i["shaping"] > 0 for i in ib)
     finally:
         old.close()
         new.close()
     if reward != "sparse":
-        assert bonuses > 0  # the comparison saw the shaping pay
+        assert paid > 0  # the comparison saw the shaping pay
+    if shaping == "potential":
+        assert bonuses < 0  # and, as a potential, pay back by each episode's end
 
 
 def test_vec_env_contract_and_a_short_maskable_ppo_run() -> None:

@@ -1,0 +1,58 @@
+"""``sc2data rl fork``: a trained run's copy that trains on with another MEM.
+
+The MEM loop (``docs/mem-loop.md``) retrains the MEM on the agent's own states, then continues
+the agent's training with the new MEM. A run resumes only with the settings it was trained with
+(:func:`sc2data.rl.train.train`), and the MEM is one of them — rightly: a learning curve made
+with two rewards is not one run. A fork is a new run folder holding the original's checkpoint,
+its trained steps and its curve so far, whose ``config.json`` names the new MEM (and records the
+run and MEM it came from in ``fork.json``); ``sc2data rl train --out FORK --mem NEW …`` with the
+original's other options and a larger ``--steps`` then resumes it, its episodes seeded as any
+resume's (``seed + 1000·resumes``), never repeating the original's.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+from typing import Any
+
+from sc2data.errors import Sc2DataError
+from sc2data.files import PARTIAL, publish, sha256_file, write_atomic
+
+COPIED = ("model.zip", "state.json", "curve.csv", "curve.json")
+
+
+def fork(run: Path, out: Path, mem: Path) -> dict[str, Any]:
+    """Copy the narration-rewarded run ``run`` into ``out`` with ``mem`` as its MEM; the fork's
+    record. ``out`` must not exist; it appears whole or not at all."""
+    from sc2data.rl.train import load_config, read_config
+
+    cfg = load_config(run)
+    if cfg.reward != "narration":
+        raise Sc2DataError(f"{run} was trained with --reward {cfg.reward}; only a narration run "
+                           f"has a MEM to replace")
+    from sc2data.model.reward import load_model
+
+    load_model(mem)  # a one-line error unless it is a trained MEM
+    if out.exists():
+        raise Sc2DataError(f"{out} exists; a fork goes into a new folder")
+    config = read_config(run)
+    config["mem"] = str(mem)
+    tmp = out.with_name(f".{out.name}{PARTIAL}")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    try:
+        for name in COPIED:
+            if (run / name).is_file():
+                shutil.copy2(run / name, tmp / name)
+        write_atomic(tmp / "config.json",
+                     (json.dumps(config, indent=1, sort_keys=True) + "\n").encode())
+        record = {"from_run": str(run), "from_mem": cfg.mem, "mem": str(mem),
+                  "checkpoint_sha256": sha256_file(run / "model.zip")}
+        write_atomic(tmp / "fork.json", (json.dumps(record, indent=1) + "\n").encode())
+        publish(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return record

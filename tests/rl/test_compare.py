@@ -1,0 +1,179 @@
+"""``sc2data rl compare``: the statistics on hand-built score tables against values computed by
+hand, groups of hand-built run folders, and bad input as one line."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from sc2data.rl.compare import (curve_scores, improvement, improvement_intervals, iqm,
+                                iqm_intervals)
+from sc2data.rl.evaluate import PROTOCOL, scores
+from sc2data.rl import runs
+from sc2data.rl.train import RLConfig, _write_json
+from tests.cli import assert_one_line_error, run_cli
+
+SEEDS = [1_000_000, 1_000_001]
+SIDES = ["west", "east"]
+
+
+# -- statistics -------------------------------------------------------------------------------
+
+def test_iqm_trims_a_quarter_of_the_runs_from_each_end() -> None:
+    # 10 runs: floor(2.5) = 2 trimmed from each end, the mean of 2..7
+    assert iqm(np.arange(10.0)[:, None]) == pytest.approx(4.5)
+    # 4 runs: one from each end; an outlier run does not move it
+    assert iqm(np.array([[1.0], [2.0], [3.0], [400.0]])) == pytest.approx(2.5)
+    # 3 runs: nothing trimmed (floor(0.75) = 0), the mean
+    assert iqm(np.array([[0.0], [2.0], [4.0]])) == pytest.approx(2.0)
+
+
+def test_probability_of_improvement_counts_pairs_and_half_ties() -> None:
+    x, y = np.array([[1.0], [2.0], [3.0]]), np.array([[0.0], [2.0], [4.0]])
+    # pairs x > y: 1>0, 2>0, 3>0, 3>2 = 4; one tie (2, 2) = 0.5; of 9 pairs
+    assert improvement(x, y) == pytest.approx(4.5 / 9)
+    assert improvement(y, x) == pytest.approx(4.5 / 9)
+    assert improvement(np.array([[5.0], [6.0]]), np.array([[1.0], [2.0]])) == 1.0
+    assert improvement(x, x) == 0.5
+
+
+def test_bootstrap_intervals_hold_the_point_and_are_seeded() -> None:
+    tables = {"a": np.array([[1.0], [2.0], [3.0], [4.0]]), "flat": np.full((3, 1), 7.0)}
+    found = iqm_intervals(tables, reps=500, seed=1)
+    point, lo, hi = found["a"]
+    assert point == pytest.approx(2.5) and 1.0 <= lo <= point <= hi <= 4.0 and lo < hi
+    assert found["flat"] == (7.0, 7.0, 7.0)  # every resample of equal runs is the same
+    assert iqm_intervals(tables, reps=500, seed=1) == found
+    p, plo, phi = improvement_intervals({"a>f": (tables["a"], tables["flat"])}, 200)["a>f"]
+    assert (p, plo, phi) == (0.0, 0.0, 0.0)
+
+
+def test_curve_scores_average_the_last_window_episodes_ended_by_each_point() -> None:
+    curve = (np.array([10.0, 20.0, 30.0]), np.array([1.0, 2.0, 6.0]))
+    got = curve_scores(curve, np.array([5.0, 10.0, 25.0, 30.0]), window=2)
+    assert np.isnan(got[0]) and got[1:].tolist() == [1.0, 1.5, 4.0]
+
+
+# -- run folders ------------------------------------------------------------------------------
+
+def fake_run(path: Path, sampled: list[int], argmax: list[int] | None = None,
+             timesteps: int = 400, seeds: list[int] = SEEDS, evaluated_at: int | None = None,
+             **settings: Any) -> Path:
+    """A run folder as sc2data rl train and evaluate leave it, with hand-chosen figures: a
+    curve of 4 episodes of 100 decisions, an eval.json of ``sampled``/``argmax`` marines."""
+    cfg = RLConfig(out=str(path), **settings)
+    path.mkdir(parents=True)
+    _write_json(path / "config.json", cfg.identity())
+    (path / "model.zip").write_bytes(b"")
+    _write_json(path / "state.json", {"timesteps": timesteps, "env_steps": timesteps * 4,
+                                      "episodes": 4, "resumes": 0})
+    rows = [{"episode": e + 1, "env": 0, "timesteps": 100 * (e + 1), "env_steps": 400 * (e + 1),
+             "marines": float(sum(sampled) / len(sampled)) * e, "game_return": 0.0,
+             "return": 0.0} for e in range(4)]
+    (path / runs.CURVE_CSV).write_bytes(runs.curve_bytes(rows))
+    _write_json(path / "eval.json", {
+        "episodes": len(seeds), "seeds": seeds, "sides": SIDES[:len(seeds)],
+        "sampled": scores(sampled), "argmax": scores(argmax or sampled),
+        "trained_timesteps": timesteps if evaluated_at is None else evaluated_at,
+        "trained_env_steps": timesteps * 4, "config": cfg.identity(), "protocol": PROTOCOL})
+    return path
+
+
+def _grid(root: Path) -> list[Path]:
+    """Narration runs with final means 1, 2, 3, 4 and sparse runs 0, 2, 4 (paper space)."""
+    nar = [fake_run(root / f"nar{s}", [m, m], seed=s, action_space="paper", reward="narration",
+                    mem="/unused")
+           for s, m in enumerate([1, 2, 3, 4])]
+    sparse = [fake_run(root / f"sp{s}", [m - 1, m + 1], seed=s, action_space="paper")
+              for s, m in enumerate([0, 2, 4])]
+    return nar + sparse
+
+
+def test_compare_groups_seeds_and_reports_hand_computed_figures(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    runs = _grid(tmp_path)
+    baselines = tmp_path / "ref"
+    baselines.mkdir()
+    _write_json(baselines / "baselines.json", {
+        "episodes": 2, "seeds": SEEDS, "sides": SIDES, "episode_steps": None, "backend": "sim",
+        "protocol": PROTOCOL, "agents": {"uniform-paper": {"space": "paper", **scores([13, 15])},
+                                         "scripted": {"space": "macro", **scores([110, 120])}}})
+    out = tmp_path / "cmp"
+    code, text, err = run_cli(["rl", "compare", *runs, "--out", out, "--reps", "300",
+                               "--baselines", baselines], capsys)
+    assert code == 0, err
+    record = json.loads((out / "compare.json").read_text())
+    assert (out / "compare.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    groups = record["groups"]
+    assert set(groups) == {"paper, narration", "paper, sparse"}
+    nar, sparse = groups["paper, narration"], groups["paper, sparse"]
+    assert nar["seeds"] == [0, 1, 2, 3] and sparse["sampled"]["scores"] == [0.0, 2.0, 4.0]
+    assert nar["sampled"]["iqm"] == pytest.approx(2.5)  # the mean of 2 and 3
+    assert sparse["sampled"]["iqm"] == pytest.approx(2.0)
+    lo, hi = nar["sampled"]["ci"]
+    assert 1.0 <= lo <= 2.5 <= hi <= 4.0
+    (p,) = record["improvement"]
+    # narration over sparse: 1 beats 0; 2 beats 0 and ties 2; 3 beats 0, 2; 4 beats 0, 2, ties 4
+    assert (p["x"], p["y"]) == ("paper, narration", "paper, sparse")
+    assert p["p"] == pytest.approx((1 + 1.5 + 2 + 2.5) / 12)
+    assert record["reference"]["uniform-paper"]["mean"] == 14.0
+    curves = record["curves"]
+    assert curves["decisions"][0] == 100 and curves["decisions"][-1] == 400
+    assert "P(paper, narration > paper, sparse) = 0.58" in text
+    assert "reference uniform-paper (paper): 14.00" in text
+    # --against: only the pairs over that group
+    code, text, err = run_cli(["rl", "compare", *runs, "--against", "paper, narration",
+                               "--reps", "100"], capsys)
+    assert code == 0, err
+    assert "P(paper, sparse > paper, narration) = 0.42" in text
+
+
+def test_groups_are_told_apart_by_the_settings_that_differ(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    a = fake_run(tmp_path / "a", [1, 1], action_space="paper", reward="rules", bonus=0.1)
+    b = fake_run(tmp_path / "b", [2, 2], action_space="paper", reward="rules", bonus=0.5)
+    c = fake_run(tmp_path / "c", [2, 2], action_space="paper", reward="rules", bonus=0.5,
+                 shaping="potential")
+    code, text, err = run_cli(["rl", "compare", a, b, c, "--reps", "50"], capsys)
+    assert code == 0, err
+    assert "paper, rules [bonus=0.1]: 1 run" in text
+    assert "paper, rules [bonus=0.5]: 1 run" in text
+    assert "paper, rules, potential: 1 run" in text  # its name is its own: nothing added
+
+
+def test_bad_input_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    paper = fake_run(tmp_path / "paper", [1, 2], action_space="paper")
+    macro = fake_run(tmp_path / "macro", [1, 2], action_space="macro")
+    other = fake_run(tmp_path / "other", [1, 2, 3], action_space="paper", seed=1,
+                     seeds=[*SEEDS, 1_000_002])
+    stale = fake_run(tmp_path / "stale", [1, 2], action_space="paper", seed=2, evaluated_at=200)
+    unevaluated = fake_run(tmp_path / "noeval", [1, 2], action_space="paper", seed=3)
+    (unevaluated / "eval.json").unlink()
+    old = fake_run(tmp_path / "old", [1, 2], action_space="paper", seed=4)
+    _write_json(old / "eval.json", {"episodes": 2, "seeds": SEEDS, "marines": [1, 2],
+                                    "mean": 1.5, "std": 0.5, "deterministic": True})
+    ref = tmp_path / "ref"
+    ref.mkdir()
+    _write_json(ref / "baselines.json", {"episodes": 2, "seeds": SEEDS, "sides": SIDES,
+                                         "episode_steps": 40, "protocol": PROTOCOL,
+                                         "agents": {}})
+    cases = [
+        ([paper, macro], ("different action spaces", "one at a time")),
+        ([paper, "--against", "paper, zorg"], ("unknown group", "'paper, sparse'")),
+        ([paper, tmp_path], ("not a trained sc2data rl run",)),
+        ([paper, unevaluated], ("no evaluation", "sc2data rl evaluate")),
+        ([paper, old], ("older evaluation protocol",)),
+        ([paper, stale], ("200 decisions", "trained 400")),
+        ([paper, other], ("other episodes",)),
+        ([paper, paper], ("given twice",)),
+        ([paper, "--baselines", ref], ("other episodes", "2 of 40 steps")),
+        ([paper, "--baselines", tmp_path / "nothing"], ("does not exist",)),
+        ([paper, "--reps", "0"], ("--reps",)),
+    ]
+    for args, needles in cases:
+        code, _, err = run_cli(["rl", "compare", *args], capsys)
+        assert_one_line_error(code, err, *needles)

@@ -1,0 +1,91 @@
+"""EPIC (Gleave et al. 2021) as ``sc2data rl agreement`` computes it, on hand-built rewards."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sc2data.rl.agreement import canonical, epic_distance, pearson, pearson_distance
+
+ALL = (np.array([0, 0, 1, 1]), np.array([0, 1, 0, 1]))
+"""Every transition over two states: 0→0, 0→1, 1→0, 1→1."""
+
+
+def matrix(*rewards: np.ndarray) -> object:
+    """``reward(i, j)`` of one or more ``(n, n)`` reward matrices (stacked as columns)."""
+    def reward(i: np.ndarray, j: np.ndarray) -> np.ndarray:
+        cols = [r[i, j] for r in rewards]
+        return cols[0] if len(cols) == 1 else np.stack(cols, axis=1)
+    return reward
+
+
+def test_canonical_reward_by_hand() -> None:
+    """R = 1 for 0→1, γ = ½, D_S uniform over both states: row means (½, 0), mean ¼, so
+    C(R)(s, s') = R(s, s') + ½·m(s') − m(s) − ⅛ = (−⅜, ⅜, ⅛, −⅛) over 00, 01, 10, 11."""
+    r = np.array([[0.0, 1.0], [0.0, 0.0]])
+    got = canonical(matrix(r), *ALL, np.array([0, 1]), 0.5)
+    np.testing.assert_allclose(got, [-0.375, 0.375, 0.125, -0.125])
+
+
+def test_epic_of_a_hand_computed_pair() -> None:
+    """R_A = 1 for 0→1, R_B = 1 for 1→0 (γ = ½, every transition once): canonical rewards
+    (−⅜, ⅜, ⅛, −⅛) and (−⅛, ⅛, ⅜, −⅜), covariance 3/64, variances 5/64: ρ = 0.6 and the EPIC
+    distance sqrt((1 − 0.6) / 2) = sqrt(0.2), while the raw rewards correlate at −⅓."""
+    a = np.array([[0.0, 1.0], [0.0, 0.0]])
+    b = np.array([[0.0, 0.0], [1.0, 0.0]])
+    assert pearson(a[ALL], b[ALL]) == pytest.approx(-1 / 3)
+    c = canonical(matrix(a, b), *ALL, np.array([0, 1]), 0.5)
+    assert pearson(c[:, 0], c[:, 1]) == pytest.approx(0.6)
+    assert epic_distance(matrix(a, b), *ALL, np.array([0, 1]), 0.5) == pytest.approx(math.sqrt(0.2))
+
+
+def test_rewards_equal_up_to_shaping_and_scale_are_at_distance_zero() -> None:
+    rng = np.random.default_rng(0)
+    n, gamma = 7, 0.99
+    a = rng.normal(size=(n, n))
+    phi = rng.normal(size=n)
+    b = 3.0 * a + gamma * phi[None, :] - phi[:, None]  # potential shaping, positive scale
+    s, s2 = rng.integers(0, n, 40), rng.integers(0, n, 40)
+    support = np.arange(n)
+    assert epic_distance(matrix(a, b), s, s2, support, gamma) == pytest.approx(0.0, abs=1e-6)
+    assert pearson_distance(a[s, s2], b[s, s2]) > 0.05  # the shaping hides it from plain ρ
+    assert epic_distance(matrix(a, -a), s, s2, support, gamma) == pytest.approx(1.0)
+    other = rng.normal(size=(n, n))
+    assert 0.2 < epic_distance(matrix(a, other), s, s2, support, gamma) < 1.0
+
+
+def test_constant_rewards_have_no_correlation() -> None:
+    assert pearson(np.ones(5), np.arange(5)) is None
+    assert pearson_distance(np.zeros(3), np.zeros(3)) is None
+
+
+def test_agreement_reports_f1_and_the_rewards_correlation_and_epic(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from tests.cli import run_cli
+    from tests.mem_helpers import tiny_pairset, train_tiny
+
+    mem = train_tiny(tiny_pairset(tmp_path / "pairs"), tmp_path / "mem", epochs=1)
+    run = tmp_path / "run"
+    code, _, err = run_cli(["rl", "train", "--out", run, "--steps", "64", "--envs", "1",
+                            "--rollout", "32", "--batch-size", "32", "--episode-steps", "40",
+                            "--no-progress"], capsys)
+    assert code == 0, err
+    code, text, err = run_cli(["rl", "agreement", run, "--mem", mem, "--episodes", "2"], capsys)
+    assert code == 0, err
+    assert "F1" in text and "EPIC distance" in text
+    result = json.loads((run / "agreement.json").read_text())
+    for c in result["commands"].values():
+        p, r = c["precision"], c["recall"]
+        if p and r:
+            assert c["f1"] == pytest.approx(2 * p * r / (p + r))
+        assert c["f1"] == (2 * c["tp"] / (2 * c["tp"] + c["fp"] + c["fn"])
+                           if c["tp"] + c["fp"] + c["fn"] else None)
+    reward = result["reward"]
+    assert reward["epic_transitions"] == result["stacks"] == 80  # two 40-step episodes
+    assert reward["epic_support"] == 32 and reward["gamma"] == 0.99
+    assert reward["epic"] is None or 0.0 <= reward["epic"] <= 1.0
+    assert reward["pearson"] is None or -1.0 <= reward["pearson"] <= 1.0

@@ -237,7 +237,8 @@ def check_config(cfg: RLConfig) -> tuple[Any, Any]:
     from sc2data.rl.narration import check_readable, load_narration
 
     narration = load_narration(cfg.narration)
-    scorer = load_model(cfg.mem, device=resolve_device(cfg.device), threads=None)  # the learner's
+    # threads=None: the scorer runs on the learner's threads (load_model's default is one)
+    scorer = load_model(cfg.mem, device=resolve_device(cfg.device), threads=None)
     check_readable(narration, scorer)
     return narration, scorer
 

@@ -23,11 +23,18 @@ $(VENV)/.stamp: pyproject.toml
 demo: $(VENV)/.stamp
 	SC2DATA=$(BIN)/sc2data bash scripts/demo.sh $(DEMO)
 
-# After `make demo`: a narration-shaped MaskablePPO agent from the demo's MEM (a few minutes).
-rl-demo: $(VENV)/.stamp
-	$(BIN)/sc2data rl train --reward narration --mem $(DEMO)/run --steps 2048 --out $(DEMO)/rl-narration
-	$(BIN)/sc2data rl evaluate $(DEMO)/rl-narration --episodes 3
-	$(BIN)/sc2data rl plot $(DEMO)/rl-narration --out $(DEMO)/rl-curves.png
+# After `make demo`: a narration-shaped MaskablePPO agent from the demo's MEM (4 envs: each ends
+# an episode, ~770 macro decisions, so that a curve is drawn; a few minutes),
+# evaluated sampled and argmax on 10 episodes (both start sides), beside the reference agents
+# (the masked uniform policy, reduced-random, scripted) played once on the same episodes.
+rl-demo: $(VENV)/.stamp $(DEMO)/rl-baselines/baselines.json
+	$(BIN)/sc2data rl train --reward narration --mem $(DEMO)/run --steps 4096 --envs 4 --out $(DEMO)/rl-narration
+	$(BIN)/sc2data rl evaluate $(DEMO)/rl-narration
+	$(BIN)/sc2data rl compare $(DEMO)/rl-narration --baselines $(DEMO)/rl-baselines --out $(DEMO)/rl-compare
+	$(BIN)/sc2data rl plot $(DEMO)/rl-narration --baselines $(DEMO)/rl-baselines --out $(DEMO)/rl-curves.png
+
+$(DEMO)/rl-baselines/baselines.json: | $(VENV)/.stamp
+	$(BIN)/sc2data rl baselines --out $(DEMO)/rl-baselines
 
 # Two processes (pytest-xdist), a test file to each at a time: module fixtures are built once.
 test: $(VENV)/.stamp

@@ -45,6 +45,25 @@ SUBSTITUTIONS: list[tuple[str, str]] = [
     ("--steps 20000", "--steps 64 --rollout 32 --batch-size 32 --episode-steps 40 "
                       "--checkpoint-every 64 --no-progress"),
     ("sc2data rl evaluate runs/rl-narr --episodes 10", "sc2data rl evaluate runs/rl-narr --episodes 1"),
+    # docs/mem-loop.md: 3 episodes a source, the tiny recipe's counts, a tiny MEM and agent.
+    ("--episodes 20 --workers 2 --out loop/data/random",
+     "--episodes 3 --workers 2 --out loop/data/random"),
+    ("--episodes 20 --workers 2 --out loop/data/policy",
+     "--episodes 3 --workers 2 --out loop/data/policy"),
+    ("pair manifests/smoke.toml --data loop/data/random",
+     "pair manifests/tiny.toml --data loop/data/random"),
+    ("sc2data pair manifests/mem-loop.toml",
+     "sed -e 's/= 40$/= 3/' -e 's/= 200$/= 12/' manifests/mem-loop.toml > manifests/tiny-loop.toml"
+     " && sc2data pair manifests/tiny-loop.toml"),
+    ("--out loop/mem-0\n", "--out loop/mem-0 --epochs 1 --threads 1 --vocab-size 2000 "
+                            "--no-progress\n"),
+    ("--out loop/mem-1\n", "--out loop/mem-1 --epochs 1 --threads 1 --vocab-size 2000 "
+                            "--no-progress\n"),
+    ("--steps 65536", "--steps 64 --rollout 32 --batch-size 32 --episode-steps 40 "
+                      "--checkpoint-every 64 --no-progress"),
+    ("--steps 131072", "--steps 128 --rollout 32 --batch-size 32 --episode-steps 40 "
+                       "--checkpoint-every 64 --no-progress"),
+    ("--episodes 10\n", "--episodes 1\n"),
 ]
 """(text in a block, what runs instead): the README's sizes made small. The build block writes
 what ``make demo`` would (``demo-out/``), which later blocks read."""

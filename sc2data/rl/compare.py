@@ -316,7 +316,8 @@ def _figure(record: dict[str, Any], window: int) -> bytes:
         plot_utils.plot_sample_efficiency_curve(
             np.array(curves["decisions"]), point, band, algorithms=names, colors=colors,
             xlabel="decisions (all envs)",
-            ylabel=f"marines per episode, IQM over runs (last {window} episodes)", ax=left,
+            ylabel=f"marines per episode, IQM over runs\n(mean of the last ≤ {window} "
+                   "episodes)", ax=left,
             labelsize="medium", ticklabelsize="small")
     else:
         left.text(0.5, 0.5, "no training episodes common to all runs", ha="center",
@@ -338,10 +339,12 @@ def _figure(record: dict[str, Any], window: int) -> bytes:
             continue
         for ax, draw in ((left, left.axhline), (right, right.axvline)):
             draw(ref["mean"], color="0.4", lw=1, ls=":" if name.startswith("uniform") else "--")
-        left.annotate(f"{name} {ref['mean']:.1f}", (0.01, ref["mean"]),
-                      xycoords=("axes fraction", "data"), fontsize=7, color="0.3", va="bottom")
+        left.annotate(f"{name} {ref['mean']:.1f}", (0.99, ref["mean"]),
+                      xycoords=("axes fraction", "data"), fontsize=7, color="0.3", va="bottom",
+                      ha="right")
+    right.set_ylim(-0.6, len(names) - 0.4)
     handles = [plt.Line2D([], [], color=colors[g], label=g) for g in names]
-    left.legend(handles=handles, fontsize=7, loc="upper left")
+    left.legend(handles=handles, fontsize=7, loc="best")
     fig.suptitle(f"BuildMarines, {record['action_space']} space: {record['episodes']} "
                  f"evaluation episodes a run, {record['reps']} bootstrap resamples", fontsize=9)
     fig.tight_layout()

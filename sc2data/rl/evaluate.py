@@ -434,7 +434,7 @@ def plot(runs: Sequence[Path], out: Path, window: int = 10, group: bool = False,
     if reference is not None:
         reference_lines(ax, reference, {str(c.get("action_space")) for _, c, _ in curves})
     ax.set_xlabel("pysc2 steps (all envs)")
-    ax.set_ylabel(f"marines per episode (rolling mean of {window}"
+    ax.set_ylabel(f"marines per episode\n(rolling mean of {window}"
                   + ("; points: fewer episodes)" if short else ")"))
     ax.set_title("BuildMarines, MaskablePPO: game score while training")
     ax.legend(fontsize=7)

@@ -44,24 +44,28 @@ SHAPINGS: tuple[str, ...] = ("event", "potential")
 _SCORE = features.ScoreCumulative
 VALUE_UNIT = 50
 """Minerals of an SCV (and of a marine): the unit of :func:`progress`."""
+START_VALUE = 400 + 12 * VALUE_UNIT
+"""Minerals' worth the map starts the player with: a command centre and 12 SCVs."""
 
 
 def progress(score_cumulative: np.ndarray) -> np.ndarray:
     """The rules reward's potential per unit of ``bonus``, from pysc2's ``score_cumulative``
-    vector (last axis): the minerals' worth of the units and structures the player has made, in
-    SCVs (``(total_value_units + total_value_structures) / 50``), plus the marines made
-    (``score``). An SCV adds 1, a supply depot 2, a barracks 3 (at placement, as the rules see
-    a footprint appear), a marine 2 (its value and the score).
+    vector (last axis): the minerals' worth of the units and structures the player has made
+    since the start, in SCVs (``(total_value_units + total_value_structures − 1,000) / 50``),
+    plus the marines made (``score``). 0 at the start; an SCV adds 1, a supply depot 2, a
+    barracks 3 (at placement, as the rules see a footprint appear), a marine 2 (its value and
+    the score).
 
     Why this potential: it is a function of the state that the labelling rules' own inputs
     show (the score vector ``build_scv`` and ``train_marine`` read; the footprints the depot and
     barracks rules see are in the structures' value), so it rewards exactly the build order the
     rules reward, and it grows only by building — time passing, mining and selecting (the
-    ``collect_minerals`` rule) leave it unchanged. A count of rule
-    firings would depend on the history, not the state."""
+    ``collect_minerals`` rule) leave it unchanged. A count of rule firings would depend on the
+    history, not the state. Counted from the start (Φ(s_0) = 0), the episode's discounted
+    shaping sums to 0 and each decision's drift ``−(1 − γ)·Φ`` is only what was built."""
     s = np.asarray(score_cumulative, dtype=np.float64)
-    return ((s[..., _SCORE.total_value_units] + s[..., _SCORE.total_value_structures])
-            / VALUE_UNIT + s[..., _SCORE.score])
+    return ((s[..., _SCORE.total_value_units] + s[..., _SCORE.total_value_structures]
+             - START_VALUE) / VALUE_UNIT + s[..., _SCORE.score])
 
 
 def check_shaping(shaping: str, gamma: float) -> None:

@@ -177,3 +177,13 @@ def test_bad_input_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str
     for args, needles in cases:
         code, _, err = run_cli(["rl", "compare", *args], capsys)
         assert_one_line_error(code, err, *needles)
+
+
+def test_runs_written_before_shaping_read_as_event_shaping(tmp_path: Path) -> None:
+    from sc2data.rl.train import load_config
+
+    run = fake_run(tmp_path / "old", [1, 2], action_space="paper", reward="rules")
+    config = json.loads((run / "config.json").read_text())
+    del config["shaping"]
+    _write_json(run / "config.json", config)
+    assert load_config(run).shaping == "event"

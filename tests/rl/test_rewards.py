@@ -180,30 +180,31 @@ def discounted(rewards: Sequence[float], gamma: float) -> float:
 
 
 def test_rules_potential_is_what_was_built_and_telescopes() -> None:
-    # Φ = bonus · ((units + structures) / 50 + marines): 20 at the start (a CC, 12 SCVs),
-    # 21 with an SCV more, 24 with a barracks placed, 26 with a marine (its value and score).
+    # Φ = bonus · ((units + structures − 1,000) / 50 + marines): 0 at the start (a CC and 12
+    # SCVs), 1 with an SCV more, 4 with a barracks placed, 6 with a marine (value and score).
     start = built(600)
     decisions = [([built(650)], 0.0), ([built(650, 550)], 0.0), ([built(700, 550, 1)], 1.0)]
     env = RuleShaping(ScriptedEnv(start, decisions), bonus=0.5, shaping="potential", gamma=0.9)
     env.reset()
     got = [env.step(0) for _ in decisions]
     shaping = [g[4]["shaping"] for g in got]
-    assert shaping == pytest.approx([0.9 * 10.5 - 10.0, 0.9 * 12.0 - 10.5, 0.0 - 12.0])
+    assert shaping == pytest.approx([0.9 * 0.5 - 0.0, 0.9 * 2.0 - 0.5, 0.0 - 2.0])
     assert [g[1] for g in got] == pytest.approx([s + g for s, g in zip(shaping, (0, 0, 1))])
-    # The episode's discounted shaping is -Φ(s_0) whatever was built: nothing to farm.
-    assert discounted(shaping, 0.9) == pytest.approx(-10.0)
+    # The episode's discounted shaping is -Φ(s_0) = 0 whatever was built: nothing to farm.
+    assert discounted(shaping, 0.9) == pytest.approx(0.0)
 
 
 def test_a_rules_loop_pays_as_an_event_and_not_as_a_potential() -> None:
     # Sending an idle worker back to mine, again and again: collect_minerals fires each time.
-    loop = [([built(600, idle=1)], 0.0), ([built(600, idle=0)], 0.0)] * 3
-    event = RuleShaping(ScriptedEnv(built(600, idle=1), loop), bonus=0.5)
+    loop = [([built(650, idle=1)], 0.0), ([built(650, idle=0)], 0.0)] * 3
+    event = RuleShaping(ScriptedEnv(built(650, idle=1), loop), bonus=0.5)
     event.reset()
     assert sum(event.step(0)[4]["shaping"] for _ in loop) == pytest.approx(1.5)
-    potential = RuleShaping(ScriptedEnv(built(600, idle=1), loop), bonus=0.5,
+    potential = RuleShaping(ScriptedEnv(built(650, idle=1), loop), bonus=0.5,
                             shaping="potential", gamma=1.0)
     potential.reset()
-    assert [potential.step(0)[4]["shaping"] for _ in loop] == [0.0] * 5 + [-10.0]
+    # Φ = 0.5 throughout (one SCV more than the start): nothing until the end takes it back.
+    assert [potential.step(0)[4]["shaping"] for _ in loop] == [0.0] * 5 + [-0.5]
 
 
 def test_narration_potential_counts_commands_matched_this_episode() -> None:

@@ -2,7 +2,10 @@
 
 Each run is ``sc2data rl train`` (its defaults: 16 games in worker processes, the learner on
 every core, so one job at a time fills the machine; ``--jobs`` runs several), then ``sc2data rl
-evaluate`` on seeded episodes training never used, deterministic and sampled. Everything is resumable: rerunning the same command resumes unfinished training runs
+evaluate`` on seeded episodes training never used (both start sides, sampled and argmax); the
+reference agents are played once on the same episodes (``rl baselines``) and every action
+space's runs are compared with ``rl compare`` (IQM, stratified-bootstrap CIs, probability of
+improvement), into ``OUT/<space>-compare/``. Everything is resumable: rerunning the same command resumes unfinished training runs
 (``rl train`` resumes itself) and skips evaluations already written for the trained step count.
 Narration runs wait until the MEM run (``--mem``) has finished training. Prints and writes
 ``OUT/summary.md`` (the table of BENCHMARKS.md) and one learning-curve PNG per action space.
@@ -30,7 +33,7 @@ from typing import Any
 import numpy as np
 
 SC2DATA = [sys.executable, "-m", "sc2data.cli"]
-REWARDS = ("sparse", "rules", "narration")
+REWARDS = ("sparse", "rules", "narration", "zero")
 
 
 def sh(args: list[str], log: Path) -> float:
@@ -86,12 +89,11 @@ def one_run(out: Path, space: str, reward: str, seed: int, steps: int, a: argpar
         times_file.write_text(json.dumps(times))
     trained = (_read(run / "state.json") or {}).get("timesteps")
     episodes = int(dict(s.split("=", 1) for s in a.eval_episodes)[space])
-    for file, extra in (("eval.json", []), ("eval-stochastic.json", ["--stochastic"])):
-        done = _read(run / file)
-        if done and done.get("trained_timesteps") == trained and done.get("episodes") == episodes:
-            continue
-        times[file] = sh(["rl", "evaluate", str(run), "--episodes", str(episodes),
-                          "--no-progress", *extra], log)
+    done = _read(run / "eval.json")
+    if not (done and done.get("trained_timesteps") == trained and done.get("episodes") == episodes
+            and "sampled" in done):
+        times["eval_s"] = sh(["rl", "evaluate", str(run), "--episodes", str(episodes),
+                              "--no-progress"], log)
         times_file.write_text(json.dumps(times))
 
 
@@ -103,7 +105,7 @@ def summary(out: Path, last: int = 10) -> str:
     """The results table: per action space and reward, over seeds."""
     lines = ["| space | reward | runs | decisions | pysc2 steps | training episodes | "
              f"marines, first {last} episodes | marines, last {last} episodes | "
-             "evaluate deterministic | evaluate sampled | train min / run |",
+             "evaluate argmax | evaluate sampled | train min / run |",
              "| --- | --- | ---: | ---: | ---: | ---: | --- | --- | --- | --- | ---: |"]
     for space_dir in sorted(p for p in out.iterdir() if p.is_dir()):
         groups: dict[str, list[Path]] = {}
@@ -120,10 +122,10 @@ def summary(out: Path, last: int = 10) -> str:
                 st = _read(run / "state.json") or {}
                 steps.append(st.get("timesteps", 0))
                 env_steps.append(st.get("env_steps", 0))
-                for file, into in (("eval.json", det), ("eval-stochastic.json", sto)):
-                    e = _read(run / file)
-                    if e:
-                        into.append(e["mean"])
+                e = _read(run / "eval.json") or {}
+                if "sampled" in e:
+                    det.append(e["argmax"]["mean"])
+                    sto.append(e["sampled"]["mean"])
                 t = _read(space_dir / f"{run.name}.times.json") or {}
                 if "train_s" in t:
                     mins.append(t["train_s"] / 60)
@@ -141,11 +143,14 @@ def main() -> None:
     ap.add_argument("--mem", type=Path, help="MEM run for the narration reward.")
     ap.add_argument("--steps", nargs="*", default=["macro=40960", "paper=20480"],
                     help="SPACE=DECISIONS per run, one per action space to run.")
-    ap.add_argument("--rewards", nargs="*", default=list(REWARDS), choices=REWARDS)
-    ap.add_argument("--seeds", nargs="*", type=int, default=[0, 1, 2])
+    ap.add_argument("--rewards", nargs="*", default=["sparse", "rules", "narration"],
+                    choices=REWARDS)
+    ap.add_argument("--seeds", nargs="*", type=int, default=list(range(10)),
+                    help="Training seeds (≥ 10 for a claim: Agarwal et al. 2021).")
     ap.add_argument("--jobs", type=int, default=1)
-    ap.add_argument("--eval-episodes", nargs="*", default=["macro=5", "paper=2"],
-                    help="SPACE=EPISODES of each evaluation (deterministic, then sampled).")
+    ap.add_argument("--eval-episodes", nargs="*", default=["macro=10", "paper=10"],
+                    help="SPACE=EPISODES of each evaluation (half with each start side; "
+                         "sampled and argmax).")
     ap.add_argument("--paraphrased", type=Path, help="Also one narration run (seed 0) per action "
                     "space with this narration file.")
     ap.add_argument("--summary", action="store_true", help="Only print the table.")
@@ -170,9 +175,17 @@ def main() -> None:
                             for space, budget in budgets.items()]
             for f in futures:
                 f.result()
+        episodes = dict(s.split("=", 1) for s in a.eval_episodes)
         for space in budgets:
             runs = sorted(str(p) for p in (out / space).iterdir() if (p / "config.json").is_file())
-            sh(["rl", "plot", *runs, "--out", str(out / f"curves-{space}.png")], out / "plot.log")
+            ref = out / f"baselines-{episodes[space]}"
+            if not (ref / "baselines.json").is_file():
+                sh(["rl", "baselines", "--out", str(ref), "--episodes", episodes[space],
+                    "--no-progress"], out / "baselines.log")
+            sh(["rl", "plot", *runs, "--group", "--baselines", str(ref), "--out",
+                str(out / f"curves-{space}.png")], out / "plot.log")
+            sh(["rl", "compare", *runs, "--baselines", str(ref), "--out",
+                str(out / f"{space}-compare")], out / "compare.log")
     table = summary(out)
     print(table)
     (out / "summary.md").write_text(table + "\n")

@@ -39,14 +39,23 @@ def decision_stacks(frames: Mapping[str, np.ndarray], n_frames: np.ndarray, sche
     return StackBatch(arrays, schema), counts
 
 
-def potential_step(before: np.ndarray, after: np.ndarray, done: np.ndarray, gamma: float
-                   ) -> np.ndarray:
+def potential_step(before: np.ndarray, after: np.ndarray, done: np.ndarray, gamma: float,
+                   steps: np.ndarray | None = None) -> np.ndarray:
     """Potential-based shaping for every game: ``γ·Φ(s') − Φ(s)``, ``Φ(s') = 0`` where the
     episode ended (as :class:`~sc2data.rl.rewards._Shaping` pays it)."""
-    return gamma * np.where(np.asarray(done, dtype=bool), 0.0, after) - before
+    # Python's float power, game by game: numpy's vectorised power may differ in the last bit
+    # from the per-game wrappers' (the equality test holds the two to the bit).
+    discount = gamma if steps is None else np.array([gamma ** int(k) for k in steps])
+    return discount * np.where(np.asarray(done, dtype=bool), 0.0, after) - before
 
 
-class BatchedRules:
+class _Potential:
+    smdp = False
+    """Potential-based: Φ(s') discounted γᵏ for a decision of k pysc2 steps (SMDP), as the
+    per-game wrappers do (:attr:`sc2data.rl.rewards._Shaping.smdp`)."""
+
+
+class BatchedRules(_Potential):
     """:class:`~sc2data.rl.rewards.RuleShaping` for all games: ``bonus`` per rule firing on
     each stack of the decision, or (``shaping="potential"``) ``γ·Φ(s') − Φ(s)`` with
     ``Φ = bonus · progress`` (:func:`~sc2data.rl.rewards.progress`) of the decision's first and
@@ -75,7 +84,8 @@ class BatchedRules:
             last = np.asarray(n_frames, dtype=np.int64) - 1
             before = self.bonus * progress(score[:, 0])
             after = self.bonus * progress(score[np.arange(len(last)), last])
-            return potential_step(before, after, done, self.gamma), [{} for _ in last]
+            return potential_step(before, after, done, self.gamma,
+                                  last if self.smdp else None), [{} for _ in last]
         batch, counts = decision_stacks(frames, n_frames, self.schema)
         from sc2data.labels.registry import call
 
@@ -88,7 +98,7 @@ class BatchedRules:
         return self.bonus * per_game, [{} for _ in counts]
 
 
-class BatchedNarration:
+class BatchedNarration(_Potential):
     """:class:`~sc2data.rl.rewards.NarrationShaping` for all games: each game's current command
     ``k`` advances (and pays ``bonus``) on the first of its stacks, in order, the MEM puts within
     ``threshold`` of it; ``patience`` > 0 skips a command not matched in that many decisions; a
@@ -153,7 +163,8 @@ class BatchedNarration:
         if self.shaping == "potential":
             before = self.bonus * self.matched
             after = self.bonus * (self.matched + made)
-            bonus = potential_step(before, after, done, self.gamma)
+            bonus = potential_step(before, after, done, self.gamma,
+                                   counts if self.smdp else None)
         self.matched = np.where(np.asarray(done, dtype=bool), 0, self.matched + made)
         return bonus, infos
 
@@ -174,9 +185,18 @@ class BatchedZero:
 
 def make_shaping(reward: str, *, scorer: Any = None, narration: Narration | None = None,
                  bonus: float | None = None, threshold: float = 0.5, patience: int = 0,
-                 shaping: str = "event", gamma: float = 0.99) -> Any:
+                 shaping: str = "event", gamma: float = 0.99, smdp: bool = False) -> Any:
     """The batched shaping of ``reward`` (None for the game's sparse reward), its bonus paid as
-    ``shaping`` (:data:`~sc2data.rl.rewards.SHAPINGS`)."""
+    ``shaping`` (:data:`~sc2data.rl.rewards.SHAPINGS`; γ per pysc2 step with ``smdp``)."""
+    made = _make(reward, scorer=scorer, narration=narration, bonus=bonus, threshold=threshold,
+                 patience=patience, shaping=shaping, gamma=gamma)
+    if isinstance(made, _Potential):
+        made.smdp = smdp
+    return made
+
+
+def _make(reward: str, *, scorer: Any, narration: Narration | None, bonus: float | None,
+          threshold: float, patience: int, shaping: str, gamma: float) -> Any:
     from sc2data.rl.rewards import REWARDS, check_shaping
 
     check_shaping(shaping, gamma)

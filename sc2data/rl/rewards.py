@@ -88,6 +88,9 @@ class _Shaping(gym.Wrapper):  # type: ignore[type-arg]
 
     shaping = "event"
     gamma = 0.99
+    smdp = False
+    """Potential-based: discount Φ(s') by γᵏ for a decision of k pysc2 steps, as PPO does with
+    SMDP discounting (:mod:`sc2data.rl.smdp`), so the shaping stays potential-based."""
 
     def action_masks(self) -> np.ndarray:
         return self.env.unwrapped.action_masks()  # type: ignore[attr-defined, no-any-return]
@@ -100,7 +103,8 @@ class _Shaping(gym.Wrapper):  # type: ignore[type-arg]
             before = self.potential(frames[0])
             self.shape(frames)  # advances what the potential reads (the narration's progress)
             after = 0.0 if terminated or truncated else self.potential(frames[-1])
-            extra = self.gamma * after - before
+            discount = self.gamma ** (len(frames) - 1) if self.smdp else self.gamma
+            extra = discount * after - before
         else:
             extra = self.shape(frames)
         info = {**info, "game_reward": game, "shaping": extra}
@@ -254,9 +258,20 @@ class NarrationShaping(_Shaping):
 def wrap_reward(env: gym.Env, reward: str, *, scorer: Any = None,  # type: ignore[type-arg]
                 narration: Narration | None = None, bonus: float | None = None,
                 threshold: float = 0.5, patience: int = 0, shaping: str = "event",
-                gamma: float = 0.99) -> gym.Env:  # type: ignore[type-arg]
+                gamma: float = 0.99, smdp: bool = False) -> gym.Env:  # type: ignore[type-arg]
     """``env`` under the reward wrapper named ``reward`` (one of :data:`REWARDS`), its bonus
-    paid as ``shaping`` (:data:`SHAPINGS`; γ for the potential-based form)."""
+    paid as ``shaping`` (:data:`SHAPINGS`; γ for the potential-based form, per pysc2 step with
+    ``smdp``)."""
+    wrapped = _wrap(env, reward, scorer=scorer, narration=narration, bonus=bonus,
+                    threshold=threshold, patience=patience, shaping=shaping, gamma=gamma)
+    if isinstance(wrapped, _Shaping):
+        wrapped.smdp = smdp
+    return wrapped
+
+
+def _wrap(env: gym.Env, reward: str, *, scorer: Any, narration: Narration | None,  # type: ignore[type-arg]
+          bonus: float | None, threshold: float, patience: int, shaping: str,
+          gamma: float) -> gym.Env:  # type: ignore[type-arg]
     check_shaping(shaping, gamma)
     if reward == "sparse":
         return SparseReward(env)

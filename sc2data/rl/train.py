@@ -255,7 +255,7 @@ def make_env(cfg: RLConfig, scorer: Any = None, narration: Any = None) -> Any:
         narration, scorer = check_config(cfg)
     return wrap_reward(env, cfg.reward, scorer=scorer, narration=narration, bonus=cfg.bonus,
                        threshold=cfg.threshold, patience=cfg.patience, shaping=cfg.shaping,
-                       gamma=cfg.gamma)
+                       gamma=cfg.gamma, smdp=cfg.smdp and cfg.action_space == "macro")
 
 
 def game_loops(cfg: RLConfig) -> int | None:
@@ -275,7 +275,7 @@ def make_vec_env(cfg: RLConfig, scorer: Any = None, narration: Any = None) -> An
         narration, scorer = check_config(cfg)
     shaping = make_shaping(cfg.reward, scorer=scorer, narration=narration, bonus=cfg.bonus,
                            threshold=cfg.threshold, patience=cfg.patience, shaping=cfg.shaping,
-                           gamma=cfg.gamma)
+                           gamma=cfg.gamma, smdp=cfg.smdp and cfg.action_space == "macro")
     game = GameConfig(cfg.action_space, cfg.backend, cfg.obs_config(), game_loops(cfg))
     return BuildMarinesVecEnv(game, cfg.envs, processes=cfg.processes, shaping=shaping)
 

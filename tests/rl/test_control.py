@@ -181,3 +181,14 @@ def test_smdp_advantages_discount_each_decision_by_its_steps() -> None:
     d1 = rewards[1] + 0.9 ** 2 * 0.3 - values[1]
     d0 = rewards[0] + 0.9 ** 5 * values[1] - values[0]
     assert np.allclose(b.advantages[:, 0], [d0 + 0.9 ** 5 * 0.8 * d1, d1])
+
+
+def test_potential_shaping_discounts_a_macro_decision_by_gamma_to_its_steps() -> None:
+    """With SMDP discounting the shaping must be γᵏ·Φ(s') − Φ(s) to stay potential-based."""
+    from sc2data.rl.batched import potential_step
+
+    got = potential_step(np.array([1.0, 1.0]), np.array([2.0, 2.0]), np.array([False, True]),
+                         0.9, np.array([3, 3]))
+    assert np.allclose(got, [0.9 ** 3 * 2.0 - 1.0, -1.0])
+    assert np.allclose(potential_step(np.array([1.0]), np.array([2.0]), np.array([False]), 0.9),
+                       [0.9 * 2.0 - 1.0])

@@ -45,7 +45,8 @@ def _masked_actions(masks: np.ndarray, space: str, rng: np.random.Generator) -> 
 @pytest.mark.parametrize("space, reward, processes, shaping", [
     ("macro", "sparse", 0, "event"), ("paper", "rules", 2, "event"),
     ("macro", "narration", 2, "event"), ("paper", "narration", 0, "event"),
-    ("macro", "rules", 2, "potential"), ("paper", "narration", 0, "potential")])
+    ("macro", "rules", 2, "potential"), ("paper", "narration", 0, "potential"),
+    ("macro", "narration", 2, "potential")])
 def test_same_games_and_rewards_as_the_per_game_wrappers(
         space: str, reward: str, processes: int, shaping: str, mem_run: Path) -> None:
     """Observations, masks, rewards (the bonus included, as an event or a potential), ends and

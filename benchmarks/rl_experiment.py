@@ -36,14 +36,17 @@ SC2DATA = [sys.executable, "-m", "sc2data.cli"]
 REWARDS = ("sparse", "rules", "narration", "zero")
 
 
-def sh(args: list[str], log: Path) -> float:
-    """Run one sc2data command (echoed, output appended to ``log``); its wall seconds."""
+def sh(args: list[str], log: Path, check: bool = True) -> float:
+    """Run one sc2data command (echoed, output appended to ``log``); its wall seconds. With
+    ``check`` False a failure is reported (its last line) and the experiment goes on."""
     print("$ sc2data " + shlex.join(args), flush=True)
     t0 = time.perf_counter()
     with open(log, "a") as f:
         f.write("$ sc2data " + shlex.join(args) + "\n")
         f.flush()
-        subprocess.run([*SC2DATA, *args], check=True, stdout=f, stderr=subprocess.STDOUT)
+        done = subprocess.run([*SC2DATA, *args], check=check, stdout=f, stderr=subprocess.STDOUT)
+    if done.returncode:
+        print(f"  failed: {log.read_text().strip().splitlines()[-1]}", flush=True)
     return time.perf_counter() - t0
 
 
@@ -183,9 +186,9 @@ def main() -> None:
                 sh(["rl", "baselines", "--out", str(ref), "--episodes", episodes[space],
                     "--no-progress"], out / "baselines.log")
             sh(["rl", "plot", *runs, "--group", "--baselines", str(ref), "--out",
-                str(out / f"curves-{space}.png")], out / "plot.log")
+                str(out / f"curves-{space}.png")], out / "plot.log", check=False)
             sh(["rl", "compare", *runs, "--baselines", str(ref), "--out",
-                str(out / f"{space}-compare")], out / "compare.log")
+                str(out / f"{space}-compare")], out / "compare.log", check=False)
     table = summary(out)
     print(table)
     (out / "summary.md").write_text(table + "\n")

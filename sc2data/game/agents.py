@@ -385,13 +385,16 @@ AGENT_KINDS: dict[str, AgentKind] = {}
 
 KIND_HOMES: dict[str, str] = {"policy": "sc2data.rl"}
 """Where each kind sc2data defines comes from, for the error when it is not registered yet."""
+_KIND_ARGS: dict[str, str] = {}
 
 
-def register_agent_kind(kind: str, resolve: AgentKind) -> None:
-    """Make agent names ``kind:ARG`` resolve through ``resolve`` (idempotent for one kind)."""
+def register_agent_kind(kind: str, resolve: AgentKind, arg: str = "ARG") -> None:
+    """Make agent names ``kind:ARG`` resolve through ``resolve`` (idempotent for one kind);
+    ``arg`` names the argument in messages (``policy:RUN``)."""
     if not kind.isidentifier() or kind in AGENTS:
         raise ValueError(f"agent kind {kind!r} must be an identifier and no agent's name")
     AGENT_KINDS[kind] = resolve
+    _KIND_ARGS[kind] = arg
 
 
 def _named(name: str, seed: int) -> base_agent.BaseAgent:
@@ -405,9 +408,10 @@ def resolve_agent(name: str) -> AgentSpec:
     kind, sep, arg = name.partition(":")
     if sep and kind in AGENT_KINDS:
         if not arg:
-            raise Sc2DataError(f"agent {name!r} names no {kind}: write {kind}:ARG")
+            raise Sc2DataError(f"agent {name!r} names no {kind}: write "
+                               f"{kind}:{_KIND_ARGS.get(kind, 'ARG')}")
         return AGENT_KINDS[kind](arg)
-    choices = [*AGENTS, *(f"{k}:…" for k in AGENT_KINDS)]
+    choices = [*AGENTS, *(f"{k}:{_KIND_ARGS.get(k, 'ARG')}" for k in AGENT_KINDS)]
     hint = ""
     if sep and kind in KIND_HOMES:
         hint = f" ({kind}:… agents come with {KIND_HOMES[kind]}: import it first)"

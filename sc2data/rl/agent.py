@@ -166,4 +166,4 @@ def resolve(run: str) -> AgentSpec:
                             "obs": cfg.obs, "seed": cfg.seed})
 
 
-register_agent_kind("policy", resolve)
+register_agent_kind("policy", resolve, arg="RUN")

@@ -23,7 +23,6 @@ is writing it, in one line, and ``info`` marks what it shows as a moment of a wr
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -46,8 +45,8 @@ def _rl_run(folder: Path) -> bool:
     if (folder / "model.zip").is_file() or (folder / "curve.csv").is_file():
         return True
     try:
-        record = json.loads((folder / "config.json").read_text())
-    except (OSError, ValueError):
+        record = loads((folder / "config.json").read_bytes())
+    except (OSError, ValueError):  # formats.loads: any depth, one ValueError
         return False
     return isinstance(record, dict) and "action_space" in record
 
@@ -428,6 +427,13 @@ def _rl(folder: Path) -> tuple[list[str], list[str]]:
         except (OSError, zipfile.BadZipFile, EOFError) as e:
             faults.append(f"{model} is not a readable checkpoint ({type(e).__name__}: {e}); "
                           f"delete {folder} and train it again")
+    from sc2data.rl.runs import read_state
+
+    try:  # the model and curve against the sha256 the last checkpoint recorded
+        read_state(folder)
+    except Sc2DataError as e:
+        faults.append(str(e))
+        return faults, notes
     try:
         rows = read_curve(folder)
         if state is not None and rows and max(r["timesteps"] for r in rows) > state["timesteps"] \

@@ -39,6 +39,11 @@ def fork(run: Path, out: Path, mem: Path) -> dict[str, Any]:
         raise Sc2DataError(f"{out} exists; a fork goes into a new folder")
     config = read_config(run)
     config["mem"] = str(mem)
+    if "inputs" in config:  # what the reward reads, by content: the fork's MEM now
+        from sc2data.rl.narration import load_narration
+        from sc2data.rl.runs import input_digests
+
+        config["inputs"] = input_digests(load_narration(cfg.narration), str(mem))
     tmp = out.with_name(f".{out.name}{PARTIAL}")
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)

@@ -119,7 +119,7 @@ def test_the_cli_grows_a_folder_with_its_own_settings(tmp_path: Path,
     code, out, err = run_cli(["rollout", "--out", grown, "--episodes", "4", "--no-progress"],
                              capsys)
     assert code == 0, err
-    assert "4 episodes, grown from 3, 24 stacks" in out and "(1 shards written, 1 kept)" in out
+    assert "4 episodes, grown from 3, 24 stacks" in out and "(1 shard written, 1 kept)" in out
     assert run_cli(["rollout", "--out", fresh, "--episodes", "4", *settings], capsys)[0] == 0
     assert sums(grown) == sums(fresh)
     code, _, err = run_cli(["rollout", "--out", grown, "--episodes", "5", "--seed", "6"], capsys)

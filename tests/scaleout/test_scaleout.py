@@ -338,7 +338,7 @@ def test_build_on_ray_equals_a_local_build(ray_instance: Any, tmp_path: Path,
         code, out, err = run_cli(["build", recipe, "--out", outs[name], "--no-progress", *extra],
                                  capsys)
         assert code == 0, err
-        assert "rollout: 3 episodes, 1,200 stacks (1 shards written, 0 kept)" in out
+        assert "rollout: 3 episodes, 1,200 stacks (1 shard written, 0 kept)" in out
     assert out.count("ray: 1 tasks, none retried") == 2  # the rollout's shard, the label's unit
     local, remote = (pq.read_table(o / "pairs" / "pairs.parquet") for o in outs.values())
     assert remote.equals(local) and remote.num_rows == 2 * 2 * 2 + 6

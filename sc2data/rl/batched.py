@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from sc2data.errors import Sc2DataError
-from sc2data.rl.narration import Narration, check_readable
+from sc2data.rl.narration import Narration
 from sc2data.rulebase import schema_for
 from sc2data.schema import Schema, StackBatch
 
@@ -110,15 +110,11 @@ class BatchedNarration(_Potential):
     def __init__(self, scorer: Any, narration: Narration, *, bonus: float = 1.0,
                  threshold: float = 0.5, patience: int = 0, shaping: str = "event",
                  gamma: float = 0.99) -> None:
-        from sc2data.rl.rewards import check_shaping
+        from sc2data.rl.rewards import check_narration, check_shaping
 
         check_shaping(shaping, gamma)
         self.shaping, self.gamma = shaping, float(gamma)
-        if not narration.commands:
-            raise Sc2DataError("the narration holds no command")
-        if patience < 0:
-            raise Sc2DataError(f"patience must be 0 or more, got {patience}")
-        check_readable(narration, scorer)
+        check_narration(narration, scorer, patience)
         self.scorer, self.narration = scorer, narration
         self.commands = list(narration.commands)
         self.bonus, self.threshold, self.patience = float(bonus), float(threshold), int(patience)

@@ -68,6 +68,16 @@ def progress(score_cumulative: np.ndarray) -> np.ndarray:
              - START_VALUE) / VALUE_UNIT + s[..., _SCORE.score])
 
 
+def check_narration(narration: Narration, scorer: Any, patience: int) -> None:
+    """One line unless the narration can be followed: commands, a patience of 0 or more, and
+    words the scorer reads (per-game and batched narration rewards alike)."""
+    if not narration.commands:
+        raise Sc2DataError("the narration holds no command")
+    if patience < 0:
+        raise Sc2DataError(f"patience must be 0 or more, got {patience}")
+    check_readable(narration, scorer)
+
+
 def check_shaping(shaping: str, gamma: float) -> None:
     """One-line error unless ``shaping`` is one of :data:`SHAPINGS` and γ lies in [0, 1]."""
     if shaping not in SHAPINGS:
@@ -206,11 +216,7 @@ class NarrationShaping(_Shaping):
         super().__init__(env)
         check_shaping(shaping, gamma)
         self.shaping, self.gamma = shaping, float(gamma)
-        if not narration.commands:
-            raise Sc2DataError("the narration holds no command")
-        if patience < 0:
-            raise Sc2DataError(f"patience must be 0 or more, got {patience}")
-        check_readable(narration, scorer)
+        check_narration(narration, scorer, patience)
         self.scorer, self.narration = scorer, narration
         self.bonus, self.threshold, self.patience = float(bonus), float(threshold), int(patience)
         self.schema: Schema = scorer.schema

@@ -168,8 +168,9 @@ def main() -> None:
               f"{time.strftime('%Y-%m-%d %H:%M')}", flush=True)
         lock = threading.Lock()
         jobs: list[tuple[Any, ...]] = [
-            (space, reward, seed, int(budget)) for reward in a.rewards
-            for space, budget in budgets.items() for seed in a.seeds]
+            (space, reward, seed, int(budget)) for seed in a.seeds
+            for space, budget in budgets.items() for reward in a.rewards]
+        # seed by seed: an experiment stopped early holds every reward on its first seeds
         with ThreadPoolExecutor(a.jobs) as pool:
             futures = [pool.submit(one_run, out, *job, a, lock) for job in jobs]
             if a.paraphrased is not None:

@@ -154,16 +154,18 @@ class Format:
         return int(version)
 
 
-SHARD = Format("sc2data-shard", 3, "shard", "regenerate it with this sc2data", reads=(2,))
+SHARD = Format("sc2data-shard", 4, "shard", "regenerate it with this sc2data", reads=(2, 3))
 """2: frames in blocks (one HDF5 dataset per group and dtype). 3: its ``settings`` attribute
 leaves out the dataset's episode count, so a shard's bytes do not depend on how many episodes
-follow it and a dataset grows without rewriting its full shards."""
-DATASET = Format("sc2data-dataset", 3, "dataset", "regenerate it with this sc2data", reads=(2,),
+follow it and a dataset grows without rewriting its full shards. 4: each frame's
+``available_actions`` kept as a packed mask (``/available_actions``)."""
+DATASET = Format("sc2data-dataset", 4, "dataset", "regenerate it with this sc2data", reads=(2, 3),
                  shape={"schema": dict,  # its own shape: sc2data.schema
                         "settings": {"episodes?": (int, type(None))},  # the codec: data.dataset
                         "versions?": dict})
-"""``dataset.json``; dataset format V holds shards of format V (2 and 3). A dataset of an
-older format still read is readable and verifiable, but a rollout does not add to it."""
+"""``dataset.json``; dataset format V holds shards of format V (2, 3 and 4). A dataset of an
+older format still read is readable and verifiable (a format 3 one has no action masks), but a
+rollout does not add to it."""
 PACKED = Format("sc2data.packed", 1, "packed split", "rerun sc2data pair")
 PAIRSET = Format("sc2data.pairset", 1, "pair set", "rerun sc2data pair", shape={
     "schema": dict,

@@ -19,7 +19,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from sc2data._pysc2 import features
+from sc2data._pysc2 import actions, features
 from sc2data.formats import shape_fault
 from sc2data.vocab import MINIMAP_SIZE, SCREEN_SIZE
 
@@ -108,6 +108,12 @@ VECTORS: tuple[Vector, ...] = (
 )
 """Non-spatial vectors, by pysc2's field names. ``player`` (11) plus ``score_cumulative`` (13) is
 our reading of the paper's "13 non-spatial features" gap: we keep both, whole."""
+
+AVAILABLE = Vector("available_actions", tuple(f.name for f in actions.FUNCTIONS), np.dtype(bool))
+"""pysc2's ``available_actions`` of a frame as a mask over ``actions.FUNCTIONS`` (``mask[f]``:
+function ``f`` could be called in that frame): the action masks of offline RL. Kept for every
+frame of a dataset (shard format 4 on), beside the frames rather than in a :class:`Block`, so the
+model, rules and pair sets see the same frame keys as before; older datasets have none."""
 
 
 @dataclass(frozen=True)

@@ -57,6 +57,7 @@ def test_build_grows_the_data_until_the_pairs_can_be_drawn(
     episodes = int(grow[1])
     assert f"rollout: {episodes} episodes, grown from 1" in out
     assert len(open_dataset(tmp_path / "b" / "rollout").episode_ids) == episodes
+    assert sorted(p.name for p in (tmp_path / "b").iterdir()) == ["pairs", "rollout"]  # no lock
     kinds = pq.read_table(tmp_path / "b" / "pairs" / "pairs.parquet")["kind"].to_pylist()
     assert (kinds.count("matched"), kinds.count("null")) == (80, 100)
     code, out, err = run_cli(["build", recipe, "--out", tmp_path / "b", "--no-progress"], capsys)

@@ -132,18 +132,19 @@ def test_rule_id_format() -> None:
     assert not any(RULE_ID.match(i) for i in ("Build", "2x", "a__b", "a_", "_a", "a-b", "a b"))
 
 
-def test_readme_write_your_own_rule_examples_run() -> None:
-    """The Python blocks of README's "Write your own rule", run in order, as a reader would."""
+def test_docs_write_your_own_rule_examples_run() -> None:
+    """The Python blocks of docs/rules.md's "Write your own rule", run in order, as a reader
+    would."""
     import re
     from pathlib import Path
 
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
-    section = readme.split("## Write your own rule", 1)[1].split("\n## ", 1)[0]
+    page = (Path(__file__).resolve().parents[1] / "docs" / "rules.md").read_text()
+    section = page.split("## Write your own rule", 1)[1].split("\n## ", 1)[0]
     blocks = re.findall(r"```python\n(.*?)```", section, flags=re.S)
     assert len(blocks) == 2
-    namespace: dict = {"__name__": "readme_example"}
+    namespace: dict = {"__name__": "docs_example"}
     for block in blocks:
-        exec(compile(block, "README.md", "exec"), namespace)  # noqa: S102
+        exec(compile(block, "docs/rules.md", "exec"), namespace)  # noqa: S102
     from sc2data.labels.registry import validate
 
-    validate(namespace["FinishSupplyDepot"](), "README.md")
+    validate(namespace["FinishSupplyDepot"](), "docs/rules.md")

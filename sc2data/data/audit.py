@@ -25,7 +25,15 @@ from sc2data.data.dataset import (
     read_manifest,
     shard_settings,
 )
-from sc2data.data.shards import CHUNK_INDEX, EPISODE_COLUMNS, Shard, chunk_table
+from sc2data.data.shards import (
+    CHUNK_INDEX,
+    EPISODE_COLUMNS,
+    MASK_BYTES,
+    MASKS,
+    Shard,
+    chunk_table,
+    unpack_available,
+)
 from sc2data.errors import Sc2DataError
 from sc2data.files import PARTIAL, sha256_file
 from sc2data.schema import Block
@@ -97,6 +105,9 @@ def info(folder: Path) -> list[str]:
                                       if k != "codec"),
              f"codec     {_codec(manifest['settings'].get('codec'))}",
              f"versions  {'  '.join(f'{k} {v}' for k, v in manifest.get('versions', {}).items())}",
+             f"format    {manifest['format_version']}   action masks "
+             + ("kept (available_actions per frame)" if manifest["format_version"] >= 4
+                else "none (written before format 4)"),
              "", f"{'key':28s} {'dtype':7s} {'shape':10s} {'scale':>6s} {'kind':12s} "
                  "stored in"]
     block_of = {k: b.name for b in schema.blocks() for k in b.keys}
@@ -163,6 +174,8 @@ def _check_shard(path: Path, rows: dict[str, Any], manifest: dict[str, Any],
         faults += _check_chunk_index(shard)
         for key in ("function", "args", "reward"):
             faults += _check_dataset(shard, f"steps/{key}", n_steps)
+        if isinstance(version, int) and version >= 4:
+            faults += _check_masks(shard, n_frames)
         if not faults:
             fn = shard.steps()["function"]
             if len(fn) and int(fn.max()) >= len(actions.FUNCTIONS):
@@ -172,6 +185,22 @@ def _check_shard(path: Path, rows: dict[str, Any], manifest: dict[str, Any],
     finally:
         shard.close()
     return faults
+
+
+def _check_masks(shard: Shard, n_frames: int) -> list[str]:
+    """A format 4 shard keeps one packed action mask per frame, no bit beyond pysc2's table."""
+    faults = _check_dataset(shard, MASKS, n_frames)
+    if faults:
+        return faults
+    ds = shard.file[MASKS]
+    if ds.shape[1:] != (MASK_BYTES,) or ds.dtype != np.uint8:
+        return [f"{shard.path.name}:{MASKS}: shape {ds.shape[1:]} {ds.dtype}, not "
+                f"({MASK_BYTES},) uint8"]
+    rows = ds[:]
+    if len(rows) and not np.array_equal(np.packbits(unpack_available(rows), axis=-1,
+                                                    bitorder="little"), rows):
+        return [f"{shard.path.name}:{MASKS}: bits set beyond pysc2's function table"]
+    return []
 
 
 def _check_chunk_index(shard: Shard) -> list[str]:

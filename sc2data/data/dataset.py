@@ -31,7 +31,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from sc2data.data.chunks import ChunkDecoder, Codec
-from sc2data.data.shards import Shard
+from sc2data.data.shards import Shard, unpack_available
 from sc2data.errors import Sc2DataError
 from sc2data.files import write_atomic
 from sc2data.formats import DATASET, loads
@@ -240,6 +240,7 @@ class Dataset:
         self._max_open = max_open if max_open is not None else default_max_open()
         self._open: OrderedDict[int, Shard] = OrderedDict()
         self._steps: dict[int, dict[str, np.ndarray]] = {}
+        self._masks: dict[int, np.ndarray | None] = {}
 
     # -- bookkeeping --------------------------------------------------------------------------
     def __len__(self) -> int:
@@ -293,6 +294,12 @@ class Dataset:
     @property
     def settings(self) -> dict[str, Any]:
         return dict(self.manifest["settings"])
+
+    @property
+    def has_masks(self) -> bool:
+        """Whether the dataset keeps each frame's ``available_actions`` (format 4 on): then
+        :meth:`actions` gives ``available`` and ``next_available``."""
+        return int(self.manifest["format_version"]) >= 4
 
     def _shard(self, i: int) -> Shard:
         shard = self._open.get(i)
@@ -462,22 +469,40 @@ class Dataset:
     def actions(self, episodes: Sequence[int] | np.ndarray, steps: Sequence[int] | np.ndarray
                 ) -> dict[str, np.ndarray]:
         """The action taken in each stack (pysc2 ``function`` id, flattened ``args``) and the
-        ``reward`` it returned; :func:`sc2data.data.shards.function_call` rebuilds the call."""
+        ``reward`` it returned; :func:`sc2data.data.shards.function_call` rebuilds the call.
+
+        Where the dataset keeps action masks (:attr:`has_masks`), also ``available`` and
+        ``next_available``: ``(N, len(actions.FUNCTIONS))`` booleans, pysc2's
+        ``available_actions`` of the stack's previous frame (the one the action was chosen in)
+        and of its current frame."""
         episodes = np.asarray(episodes, np.int64).reshape(-1)
         steps = np.asarray(steps, np.int64).reshape(-1)
         rows = self._rows(episodes, steps)
         at = self._step_start[rows] + steps
+        frame = self._frame_start[rows] + steps
         shard_of = self._shard_of[rows]
         out: dict[str, np.ndarray] = {}
-        for si in np.unique(shard_of):
-            if int(si) not in self._steps:
-                self._steps[int(si)] = self._shard(int(si)).steps()
-            table = self._steps[int(si)]
+        for si in np.unique(shard_of).tolist():
+            if si not in self._steps:
+                shard = self._shard(si)
+                self._steps[si] = shard.steps()
+                self._masks[si] = shard.masks() if self.has_masks else None
             sel = np.flatnonzero(shard_of == si)
+            table = dict(self._steps[si])
+            masks = self._masks[si]
+            if self.has_masks:
+                if masks is None or len(masks) < int(frame[sel].max()) + 2:
+                    raise Sc2DataError(f"{self.folder / self.shard_names[si]} lacks action masks "
+                                       f"of its frames; run sc2data verify {self.folder}")
+                table["available"] = masks[frame[sel]]
+                table["next_available"] = masks[frame[sel] + 1]
             for k, v in table.items():
                 if k not in out:
                     out[k] = np.empty((len(rows), *v.shape[1:]), v.dtype)
-                out[k][sel] = v[at[sel]]
+                out[k][sel] = v if k.endswith("available") else v[at[sel]]
+        for k in ("available", "next_available"):
+            if k in out:
+                out[k] = unpack_available(out[k])
         return out
 
 

@@ -10,18 +10,22 @@ vector: (n,)}`` in the stored (lossless) dtypes; an action is the pysc2 call the
 :func:`sc2data.data.shards.function_call` rebuilds the ``FunctionCall``); a reward is what the
 game returned for it (+1 per marine on BuildMarines). ``terminations[T-1]`` is True where the game
 ended the episode (pysc2's last step, discount 0), ``truncations[T-1]`` where the rollout's
-``--max-steps`` cut it.
+``--max-steps`` cut it. Where the dataset keeps action masks (format 4 on), each observation
+also has its ``available_actions``: a boolean mask over pysc2's ``actions.FUNCTIONS``, ``(T + 1,
+573)`` per episode (row ``t`` masks the choice of action ``t``).
 
 * ``npz``: a folder of ``episode-<E>.npz`` files (``np.load``; keys ``observations/screen/…``,
-  ``actions/function``, ``actions/args``, ``rewards``, ``terminations``, ``truncations``) and
-  ``metadata.json``;
+  ``actions/function``, ``actions/args``, ``rewards``, ``terminations``, ``truncations``,
+  ``available_actions``) and ``metadata.json``;
 * ``minari``: a Minari datasets root holding ``sc2data/<name>-v0`` (``minari.load_dataset`` with
   ``MINARI_DATASETS_PATH`` set to it), made with ``minari.create_dataset_from_buffers``, its
-  spaces gymnasium ``Dict``\\ s of ``Box``\\ es and a ``Discrete`` function id;
+  spaces gymnasium ``Dict``\\ s of ``Box``\\ es and a ``Discrete`` function id, the masks in
+  ``infos["available_actions"]``;
 * ``hf``: a ``datasets.Dataset`` saved with ``save_to_disk`` (Arrow; ``datasets.load_from_disk``),
   one row per step — the stack's two frames as ``observation.<key>`` and
   ``next_observation.<key>`` columns (``observation.screen.unit_type``), the action (``function``,
-  ``args``), ``reward``, ``terminated`` and ``truncated`` — so that ``shuffle`` and batching work
+  ``args``), ``reward``, ``terminated`` and ``truncated``, and the masks of both frames,
+  ``available_actions`` and ``next_available_actions`` — so that ``shuffle`` and batching work
   on transitions.
 
 The export is written under a temporary ``….partial`` name beside ``--out`` and renamed into
@@ -72,6 +76,9 @@ class Episode:
     """``(T,)`` float64."""
     terminations: np.ndarray
     truncations: np.ndarray
+    available: np.ndarray | None = None
+    """``(T + 1, len(actions.FUNCTIONS))`` bool: each frame's ``available_actions`` (None for a
+    dataset written before masks were kept)."""
 
     def __repr__(self) -> str:
         return f"Episode(id={self.id}, steps={len(self.function)}, keys={len(self.observations)})"
@@ -108,11 +115,14 @@ def episode(ds: Dataset, episode_id: int, settings: dict[str, Any]) -> Episode:
     end = np.zeros(n, bool)
     if n:
         end[-1] = True
+    available = None
+    if "available" in acts:
+        available = np.concatenate([acts["available"], acts["next_available"][-1:]])
     return Episode(id=int(episode_id),
                    observations={k: np.concatenate(v) for k, v in frames.items()},
                    function=acts["function"].astype(np.int64), args=acts["args"],
                    rewards=acts["reward"].astype(np.float64),
-                   terminations=end & ended, truncations=end & (not ended))
+                   terminations=end & ended, truncations=end & (not ended), available=available)
 
 
 def nested(flat: dict[str, Any]) -> dict[str, Any]:
@@ -137,7 +147,10 @@ def metadata(ds: Dataset, to: str, name: str, episodes: int, steps: int) -> dict
             "schema": ds.schema.to_dict(), "arg_width": ARG_WIDTH, "versions": versions(),
             "actions": "function: pysc2 function id; args: its arguments flattened, -1 padded "
                        "(sc2data.data.shards.function_call rebuilds the FunctionCall)",
-            "rewards": "the game's reward for the step (+1 per marine on BuildMarines)"}
+            "rewards": "the game's reward for the step (+1 per marine on BuildMarines)",
+            "available_actions": ("each frame's pysc2 available_actions as a boolean mask over "
+                                  "pysc2's actions.FUNCTIONS; row t masks the choice of action t")
+            if ds.has_masks else "not kept (a dataset written before format 4)"}
 
 
 def export(data: str | os.PathLike[str], to: str, out: str | os.PathLike[str], *,
@@ -237,6 +250,8 @@ def _write_npz(ds: Dataset, episodes: Iterator[Episode], tmp: Path, name: str, n
         arrays.update({"actions/function": ep.function, "actions/args": ep.args,
                        "rewards": ep.rewards, "terminations": ep.terminations,
                        "truncations": ep.truncations})
+        if ep.available is not None:
+            arrays["available_actions"] = ep.available
         np.savez_compressed(tmp / f"episode-{ep.id:06d}.npz", **arrays)  # type: ignore[arg-type]
     (tmp / "metadata.json").write_text(json.dumps(meta, indent=1, sort_keys=True) + "\n")
     return "np.load('{out}/episode-000000.npz')['observations/screen/unit_type']"
@@ -307,7 +322,8 @@ def _write_minari(ds: Dataset, episodes: Iterator[Episode], tmp: Path, name: str
             yield EpisodeBuffer(
                 observations=nested(ep.observations),
                 actions={"function": ep.function, "args": ep.args}, rewards=ep.rewards,
-                terminations=ep.terminations, truncations=ep.truncations, infos={})
+                terminations=ep.terminations, truncations=ep.truncations,
+                infos={} if ep.available is None else {"available_actions": ep.available})
 
     previous = os.environ.get("MINARI_DATASETS_PATH")
     os.environ["MINARI_DATASETS_PATH"] = str(tmp.resolve())  # Minari joins a relative one twice
@@ -333,11 +349,13 @@ def hf_column(prefix: str, key: str) -> str:
     return f"{prefix}.{key.replace('/', '.')}"
 
 
-def hf_features(schema: Schema) -> Any:
+def hf_features(schema: Schema, masks: bool = False) -> Any:
     """The ``datasets.Features`` of one row (one step): flat columns, so that a numpy-formatted
-    batch gives one ``(B, …)`` array per layer."""
+    batch gives one ``(B, …)`` array per layer; ``masks``: with both frames' action masks."""
     import datasets
     import datasets.utils.tqdm
+
+    from sc2data._pysc2 import actions
 
     frame: dict[str, Any] = {}
     for l in schema.layers:
@@ -352,6 +370,9 @@ def hf_features(schema: Schema) -> Any:
                     "args": datasets.Sequence(datasets.Value("int16"), length=ARG_WIDTH),
                     "reward": datasets.Value("float64"), "terminated": datasets.Value("bool"),
                     "truncated": datasets.Value("bool")})
+    if masks:
+        mask = datasets.Sequence(datasets.Value("bool"), length=len(actions.FUNCTIONS))
+        columns.update({"available_actions": mask, "next_available_actions": mask})
     return datasets.Features(columns)
 
 
@@ -364,6 +385,9 @@ def _rows(episodes: Iterator[Episode]) -> Iterator[dict[str, Any]]:
             row.update({"function": int(ep.function[t]), "args": ep.args[t],
                         "reward": float(ep.rewards[t]), "terminated": bool(ep.terminations[t]),
                         "truncated": bool(ep.truncations[t])})
+            if ep.available is not None:
+                row.update({"available_actions": ep.available[t],
+                            "next_available_actions": ep.available[t + 1]})
             yield row
 
 
@@ -373,7 +397,7 @@ def _write_hf(ds: Dataset, episodes: Iterator[Episode], tmp: Path, name: str, n:
     from datasets.arrow_writer import ArrowWriter
 
     meta = metadata(ds, "hf", name, n, steps)
-    features = hf_features(ds.schema)
+    features = hf_features(ds.schema, ds.has_masks)
     arrow = tmp / "rows.arrow"  # written once, then saved as the dataset's own shards
     with ArrowWriter(features=features, path=str(arrow), writer_batch_size=64) as w:
         for row in _rows(episodes):

@@ -10,6 +10,10 @@ Layout, all derived from a :class:`~sc2data.schema.Schema`::
     /steps/function    (S,)    pysc2 function id of the action taken between frames t and t+1
     /steps/args        (S, 5)  its arguments, flattened in pysc2's order, -1 padded
     /steps/reward      (S,)    the reward the step returned
+    /available_actions (F, 72) each frame's pysc2 ``available_actions`` as a bit set over
+                               ``actions.FUNCTIONS`` (``np.packbits``, little bit order; schema's
+                               ``AVAILABLE``): row ``t`` masks the choice of step ``t``. Shard
+                               format 4 on; older shards have none
     /episodes/<column> (E,)    episode, env_seed, agent_seed, frame_start, step_start, n_steps,
                                reward
     /chunk_index       (K, C, 3) file offset, stored size and filter mask of chunk c of frame
@@ -45,9 +49,8 @@ from sc2data.data.chunks import (
 from sc2data.errors import Sc2DataError
 from sc2data.files import fsync_path
 from sc2data.formats import SHARD, loads
-from sc2data.schema import Schema, SchemaError
+from sc2data.schema import AVAILABLE, Schema, SchemaError
 
-"""2: frames stored in blocks of keys (1 had one dataset per key)."""
 ARG_WIDTH = max(sum(len(a.sizes) for a in f.args) for f in actions.FUNCTIONS)
 """Widest flattened argument list of any pysc2 function (select_rect: add, x0, y0, x1, y1)."""
 EPISODE_COLUMNS: tuple[str, ...] = ("episode", "env_seed", "agent_seed", "frame_start",
@@ -57,6 +60,25 @@ _GROW = 256
 _SEAL_EVERY = 64
 """Flushes whose compressed chunks are checksummed and written together (a few hundred KB)."""
 CHUNK_INDEX = "chunk_index"
+MASKS = "available_actions"
+"""The dataset of per-frame action masks (shard format 4 on)."""
+MASK_BYTES = -(-AVAILABLE.size // 8)
+"""Bytes of one packed mask row."""
+
+
+def pack_available(available: Sequence[int] | np.ndarray) -> np.ndarray:
+    """pysc2's ``available_actions`` (function ids) as one packed ``MASK_BYTES`` uint8 row."""
+    ids = np.asarray(available, np.int64).reshape(-1)
+    if len(ids) and (ids.min() < 0 or ids.max() >= AVAILABLE.size):
+        raise ValueError(f"available_actions holds ids outside pysc2's {AVAILABLE.size} functions")
+    mask = np.zeros(AVAILABLE.size, bool)
+    mask[ids] = True
+    return np.packbits(mask, bitorder="little")
+
+
+def unpack_available(rows: np.ndarray) -> np.ndarray:
+    """Packed mask rows ``(…, MASK_BYTES)`` as boolean masks ``(…, len(actions.FUNCTIONS))``."""
+    return np.unpackbits(rows, axis=-1, count=AVAILABLE.size, bitorder="little").astype(bool)
 
 
 def chunk_table(ds: h5py.Dataset) -> np.ndarray:
@@ -149,6 +171,7 @@ class ShardWriter:
         self._functions: list[int] = []
         self._args: list[np.ndarray] = []
         self._rewards: list[float] = []
+        self._masks: list[np.ndarray] = []
         self._episodes: list[tuple[int, ...] | tuple[Any, ...]] = []
         self._current: dict[str, Any] | None = None
 
@@ -160,8 +183,11 @@ class ShardWriter:
                          "frame_start": self._n_frames, "step_start": len(self._functions),
                          "reward": 0.0}
 
-    def add_frame(self, arrays: Mapping[str, np.ndarray]) -> None:
-        """Append one frame: ``arrays`` holds every schema key (``Schema.extract``'s output)."""
+    def add_frame(self, arrays: Mapping[str, np.ndarray],
+                  available: Sequence[int] | np.ndarray = ()) -> None:
+        """Append one frame: ``arrays`` holds every schema key (``Schema.extract``'s output),
+        ``available`` the frame's ``available_actions`` (pysc2 function ids)."""
+        self._masks.append(pack_available(available))
         slot = self._n_frames % self.codec.chunk_frames
         for b in self._blocks:
             frame = self._buffers[b.name][slot]
@@ -173,6 +199,7 @@ class ShardWriter:
         """Append one pysc2 observation: what ``add_frame(schema.extract(obs))`` does, with the
         same lossless range check, but one vectorised check per block and no intermediate copy.
         """
+        self._masks.append(pack_available(obs["available_actions"]))
         slot = self._n_frames % self.codec.chunk_frames
         for obs_key, sel, limit, buf, layers in self._spatial:
             planes = np.asarray(obs[obs_key])[sel]
@@ -270,6 +297,9 @@ class ShardWriter:
             dtype = np.float64 if col == "reward" else np.int64
             self._file.create_dataset(f"episodes/{col}", data=table[:, j].astype(dtype),
                                       chunks=(max(1, len(table)),), **kw)
+        masks = np.array(self._masks, np.uint8).reshape(-1, MASK_BYTES)
+        self._file.create_dataset(MASKS, data=masks, chunks=(max(1, min(len(masks), 4096)),
+                                                             MASK_BYTES), **kw)
         self._file.attrs["n_frames"] = self._n_frames
         self._file.attrs["n_steps"] = n
         index = np.stack([chunk_table(self._frames[b.name]) for b in self._blocks])
@@ -421,6 +451,16 @@ class Shard:
         except OSError as e:
             raise _damaged(self.path, _first_line(e)) from None
 
+    def masks(self) -> np.ndarray | None:
+        """``(F, MASK_BYTES)`` packed action masks of every frame (:func:`unpack_available`),
+        None for a shard written before they were kept (format 3 and older)."""
+        if MASKS not in self.file:
+            return None
+        try:
+            return self.file[MASKS][:]
+        except OSError as e:
+            raise _damaged(self.path, _first_line(e)) from None
+
     def close(self) -> None:
         self._sources.clear()
         if self._fd is not None:
@@ -442,5 +482,6 @@ def _first_line(e: BaseException) -> str:
     return str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
 
 
-__all__ = ["ARG_WIDTH", "CHUNK_INDEX", "ChecksumError", "FrameSource", "ObservationError",
-           "Shard", "ShardWriter", "chunk_table", "flatten_args", "function_call"]
+__all__ = ["ARG_WIDTH", "CHUNK_INDEX", "MASKS", "MASK_BYTES", "ChecksumError", "FrameSource",
+           "ObservationError", "Shard", "ShardWriter", "chunk_table", "flatten_args",
+           "function_call", "pack_available", "unpack_available"]

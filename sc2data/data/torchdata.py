@@ -11,12 +11,15 @@ encoder), where :mod:`sc2data.pairs.torchdata` serves the pairs of a pair set::
         batch["state"]["screen/unit_type"]     # (64, 2, 64, 64) uint16: previous, current frame
         batch["function"], batch["args"]       # the pysc2 call that led from one to the other
         batch["reward"]                        # (64,) float32: what the game returned for it
+        batch["available"]                     # (64, 573) bool: the calls it could have made
 
 Item ``i`` is the stack at global position ``i`` (episode, step order): ``state`` (schema key →
 the ``(2, …)`` array, frames ``step`` and ``step + 1``), ``episode``, ``step``, the action taken
 in it — ``function`` (pysc2 function id) and ``args`` (its arguments flattened, ``-1`` padded to
 :data:`~sc2data.data.shards.ARG_WIDTH`; :func:`~sc2data.data.shards.function_call` rebuilds the
-call) — and the ``reward`` it returned. A ``DataLoader`` with automatic batching fetches a whole
+call) — the ``reward`` it returned and, where the dataset keeps action masks (format 4 on),
+``available`` and ``next_available``: pysc2's ``available_actions`` of the two frames as boolean
+masks over ``actions.FUNCTIONS``. A ``DataLoader`` with automatic batching fetches a whole
 batch with one read (``__getitems__``), so each chunk it touches is decoded once. The dataset
 folder is opened lazily, once per process, so the object pickles into ``DataLoader`` workers.
 """
@@ -81,9 +84,11 @@ class StackDataset(Dataset):
         acts = rollout.actions(episodes, steps)
         args = acts["args"].astype(np.int64)
         rewards = acts["reward"].astype(np.float32)
+        masks = {k: acts[k] for k in ("available", "next_available") if k in acts}
         return [{"state": {k: v[j] for k, v in state.items()}, "episode": int(episodes[j]),
                  "step": int(steps[j]), "function": int(acts["function"][j]), "args": args[j],
-                 "reward": rewards[j]} for j in range(len(positions))]
+                 "reward": rewards[j], **{k: v[j] for k, v in masks.items()}}
+                for j in range(len(positions))]
 
     def _positions(self, indices: Sequence[int]) -> np.ndarray:
         positions = np.asarray(indices, np.int64).reshape(-1)

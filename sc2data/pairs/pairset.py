@@ -396,8 +396,9 @@ def make_pairset(recipe: Recipe, data: str | os.PathLike[str], out: str | os.Pat
     except OSError as e:
         raise Sc2DataError(f"cannot create {out}: {reason(e)}; choose another --out") \
             from None
-    # The folder is built beside its final name and renamed into place: locked from beside it.
-    with FolderLock(out.parent, "pair", name=f".{out.name}.lock", what=out):
+    # The folder is built beside its final name and renamed into place: locked from beside it,
+    # by a lock file that goes with the command (nothing is left beside the pair set).
+    with FolderLock(out.parent, "pair", name=f".{out.name}.lock", what=out, remove=True):
         try:
             return _make(recipe, data, out, labelled, labels_meta, started, progress,
                          sources, drawn)

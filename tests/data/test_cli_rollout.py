@@ -133,17 +133,17 @@ def test_folder_of_an_older_format(copy: Path, capsys: pytest.CaptureFixture[str
                  ["rollout", "--out", copy, "--env", "sim", "--agent", "random", "--episodes",
                   "3", "--seed", "7", "--episodes-per-shard", "2"]):
         code, _, err = cli(args, capsys)
-        assert_one_line_error(code, err, "has dataset format 1, not 3; regenerate it")
+        assert_one_line_error(code, err, "has dataset format 1, not 4; regenerate it")
     code, _, err = cli(["verify", copy], capsys)
-    assert code == 1 and err.startswith("FAULT ") and "has dataset format 1, not 3" in err
+    assert code == 1 and err.startswith("FAULT ") and "has dataset format 1, not 4" in err
     assert {p.name: p.read_bytes() for p in copy.iterdir()} == before
     (copy / "dataset.json").write_text(json.dumps(manifest))
     with h5py.File(copy / "shard-00001.h5", "r+") as f:
         f.attrs["format_version"] = 1
     code, _, err = cli(["info", copy], capsys)
-    assert_one_line_error(code, err, "shard-00001.h5 has shard format 1, not 3; regenerate it")
+    assert_one_line_error(code, err, "shard-00001.h5 has shard format 1, not 4; regenerate it")
     code, _, err = cli(["verify", copy], capsys)
-    assert code == 1 and "shard-00001.h5 has shard format 1, not 3" in err
+    assert code == 1 and "shard-00001.h5 has shard format 1, not 4" in err
 
 
 def test_truncated_and_non_hdf5_shards(copy: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -222,3 +222,18 @@ def test_rollout_stores_exactly_what_the_simulator_played(
         assert [function_call(f, a) for f, a in zip(acts["function"], acts["args"])] == calls
         assert acts["reward"].tolist() == rewards
         env.close()
+
+
+def test_verify_checks_the_action_masks(copy: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A format 4 shard's masks: a bit past pysc2's function table, or none at all, is a fault."""
+    with h5py.File(copy / "shard-00000.h5", "r+") as f:
+        masks = f["available_actions"]
+        row = masks[0]
+        row[-1] |= 0x80  # function 575: pysc2 has 573
+        masks[0] = row
+    with h5py.File(copy / "shard-00001.h5", "r+") as f:
+        del f["available_actions"]
+    code, _, err = cli(["verify", copy], capsys)
+    assert code == 1
+    assert "shard-00000.h5:available_actions: bits set beyond pysc2's function table" in err
+    assert "shard-00001.h5:available_actions: missing" in err

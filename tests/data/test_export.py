@@ -40,7 +40,10 @@ def expected(folder: Path) -> list[dict[str, object]]:
     for e, n in zip(ds.episode_ids.tolist(), ds.n_steps.tolist()):
         stacks = ds[e, 0:n].arrays
         frames = {k: np.concatenate([v[:, 0], v[-1:, 1]]) for k, v in stacks.items()}
-        out.append({"id": e, "frames": frames, **ds.actions([e] * n, range(n))})
+        acts = ds.actions([e] * n, range(n))
+        masks = np.concatenate([acts["available"], acts["next_available"][-1:]])
+        assert masks.shape == (n + 1, 573) and masks.any(axis=1).all()
+        out.append({"id": e, "frames": frames, "masks": masks, **acts})
     return out
 
 
@@ -73,6 +76,8 @@ def test_npz_reads_back_with_numpy(data: Path, tmp_path: Path,
             assert np.array_equal(z["rewards"], ep["reward"])
             assert z["terminations"].tolist() == [False] * (STEPS - 1) + [True]
             assert not z["truncations"].any()
+            assert z["available_actions"].dtype == bool
+            assert np.array_equal(z["available_actions"], ep["masks"])
 
 
 def test_minari_reads_back_with_minari(data: Path, tmp_path: Path,
@@ -99,6 +104,7 @@ def test_minari_reads_back_with_minari(data: Path, tmp_path: Path,
         assert np.array_equal(ep.rewards, want["reward"])
         assert ep.terminations.tolist() == [False] * (STEPS - 1) + [True]
         assert not ep.truncations.any()
+        assert np.array_equal(ep.infos["available_actions"], want["masks"])
 
 
 def test_hf_reads_back_with_datasets(data: Path, tmp_path: Path,
@@ -128,6 +134,8 @@ def test_hf_reads_back_with_datasets(data: Path, tmp_path: Path,
         assert np.array_equal(mine["reward"], ep["reward"])
         assert np.asarray(mine["terminated"]).tolist() == [False] * (STEPS - 1) + [True]
         assert not np.asarray(mine["truncated"]).any()
+        assert np.array_equal(mine["available_actions"], ep["masks"][:-1])
+        assert np.array_equal(mine["next_available_actions"], ep["masks"][1:])
 
 
 def test_a_cut_episode_is_truncated_not_terminated(cut: Path, tmp_path: Path) -> None:
@@ -186,3 +194,24 @@ def test_an_interrupted_export_leaves_nothing(data: Path, tmp_path: Path,
         with pytest.raises(KeyboardInterrupt):
             mod.export(data, to, tmp_path / to, progress=False)
         assert list(tmp_path.iterdir()) == [], to
+
+
+def test_a_dataset_without_masks_exports_without_them(tmp_path: Path) -> None:
+    """A dataset written before action masks were kept (format 3) exports as before."""
+    pytest.importorskip("datasets")
+    import datasets
+
+    from sc2data.data.export import export
+    from tests.synthetic_data import as_format
+
+    old = tmp_path / "old"
+    make_dataset(old, episodes=1)
+    as_format(old, 3)
+    export(old, "npz", tmp_path / "npz", progress=False)
+    with np.load(tmp_path / "npz" / "episode-000000.npz") as z:
+        assert "available_actions" not in z.files and len(z["rewards"]) == STEPS
+    meta = json.loads((tmp_path / "npz" / "metadata.json").read_text())
+    assert meta["available_actions"].startswith("not kept")
+    export(old, "hf", tmp_path / "hf", progress=False)
+    rows = datasets.load_from_disk(str(tmp_path / "hf" / "dataset"))
+    assert "available_actions" not in rows.column_names and len(rows) == STEPS

@@ -16,11 +16,10 @@ import pytest
 
 import sc2data
 from sc2data.data.audit import verify
-from sc2data.data.dataset import INDEX, MANIFEST, read_manifest, write_index, write_manifest
-from sc2data.data.rollout import index_rows
+from sc2data.data.dataset import INDEX, MANIFEST, read_manifest
 from sc2data.errors import Sc2DataError
 from tests.cli import assert_one_line_error, run_cli
-from tests.synthetic_data import make_dataset
+from tests.synthetic_data import as_format, make_dataset
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -126,25 +125,12 @@ def test_the_cli_grows_a_folder_with_its_own_settings(tmp_path: Path,
     assert_one_line_error(code, err, "other settings (differs in: seed)")
 
 
-def as_format_2(folder: Path) -> None:
-    """Rewrite a dataset as sc2data wrote it before datasets grew: dataset and shard format 2,
-    each shard's settings with the episode count."""
-    manifest = json.loads((folder / MANIFEST).read_text())
-    shards = sorted(folder.glob("shard-*.h5"))
-    for path in shards:
-        with h5py.File(path, "r+") as f:
-            f.attrs["format_version"] = 2
-            f.attrs["settings"] = json.dumps(manifest["settings"])
-    write_manifest(folder, {**manifest, "format_version": 2})
-    write_index(folder, [row for path in shards for row in index_rows(path)])
-
-
 def test_a_format_2_dataset_is_read_and_verified_but_not_grown(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "old"
     make_dataset(out, episodes=3)
     stacks = sc2data.open_dataset(out)[0:40].arrays
-    as_format_2(out)
+    as_format(out, 2)
     assert verify(out) == []
     for k, v in sc2data.open_dataset(out)[0:40].arrays.items():
         assert (v == stacks[k]).all()
@@ -153,4 +139,31 @@ def test_a_format_2_dataset_is_read_and_verified_but_not_grown(
     assert verify(out)[0] == "shard-00001.h5: settings differ from dataset.json"
     code, _, err = run_cli(["rollout", "--out", out, "--episodes", "4"], capsys)
     assert_one_line_error(code, err, "has dataset format 2, which this sc2data reads and "
-                                     "verifies but does not add to (it writes format 3)")
+                                     "verifies but does not add to (it writes format 4)")
+
+
+def test_a_format_3_dataset_reads_without_masks_and_is_not_grown(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Written before action masks were kept: its stacks and actions read as before, it
+    verifies, it has no masks, and a rollout into it is refused in one line (a grow would mix
+    shards with and without masks)."""
+    out = tmp_path / "old"
+    make_dataset(out, episodes=3)
+    with sc2data.open_dataset(out) as new:
+        stacks, acts = new[0:40].arrays, new.actions([0] * 5, range(5))
+        assert new.has_masks and acts["available"].shape == (5, 573)
+    as_format(out, 3)
+    old = sc2data.open_dataset(out)
+    assert verify(out) == [] and not old.has_masks
+    for k, v in old[0:40].arrays.items():
+        assert (v == stacks[k]).all()
+    got = old.actions([0] * 5, range(5))
+    assert sorted(got) == ["args", "function", "reward"]
+    assert all((got[k] == acts[k]).all() for k in got)
+    code, _, err = run_cli(["rollout", "--out", out, "--episodes", "4"], capsys)
+    assert_one_line_error(code, err, "has dataset format 3, which this sc2data reads and "
+                                     "verifies but does not add to (it writes format 4)",
+                          "roll out into a new --out")
+    code, out_text, err = run_cli(["info", out], capsys)
+    assert code == 0, err
+    assert "action masks none (written before format 4)" in out_text

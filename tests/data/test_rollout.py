@@ -238,3 +238,29 @@ def test_resume_checks_unindexed_shards_through_their_checksums(tmp_path: Path) 
     (out / "shard-00000.h5").unlink()  # the remedy the message gives
     rollout(config, out, workers=1, progress=False)
     assert verify(out) == []
+
+
+def test_the_simulator_s_action_masks_are_kept_per_frame_and_reproducible(tmp_path: Path) -> None:
+    """Each frame's ``available_actions`` is stored (shard format 4): the call taken at step t
+    is always among frame t's, the masks change as the game does, and the same settings and
+    seed give the same bytes whatever the worker count."""
+    import h5py
+
+    from sc2data.data.shards import MASK_BYTES, MASKS
+
+    settings = dict(env="sim", agent="reduced-random", episodes=2, seed=3, episodes_per_shard=1,
+                    max_steps=120)
+    one = rollout(RolloutConfig(**settings), tmp_path / "one", workers=1, progress=False)
+    rollout(RolloutConfig(**settings), tmp_path / "two", workers=2, progress=False)
+    assert shas(tmp_path / "one") == shas(tmp_path / "two") and one.steps == 240
+    with h5py.File(tmp_path / "one" / "shard-00000.h5", "r") as f:
+        assert f[MASKS].shape == (121, MASK_BYTES) and f.attrs["format_version"] == 4
+    ds = sc2data.open_dataset(tmp_path / "one")
+    episodes, steps = ds.locate(0, len(ds))
+    acts = ds.actions(episodes, steps)
+    assert acts["available"].shape == (240, len(actions.FUNCTIONS))
+    assert acts["available"][np.arange(240), acts["function"]].all()
+    assert np.array_equal(acts["available"][1:120], acts["next_available"][:119])
+    assert len({m.tobytes() for m in acts["available"]}) > 1
+    assert acts["available"][:, 0].all()  # no_op, always available
+    assert verify(tmp_path / "one") == []

@@ -235,7 +235,7 @@ def test_shard_of_an_older_format_is_refused(tmp_path: Path) -> None:
     write_shard(path)
     with h5py.File(path, "r+") as f:
         f.attrs["format_version"] = 1
-    with pytest.raises(Sc2DataError, match="has shard format 1, not 3; regenerate it"):
+    with pytest.raises(Sc2DataError, match="has shard format 1, not 4; regenerate it"):
         Shard(path)
 
 
@@ -268,15 +268,18 @@ def test_add_observation_equals_add_frame_of_extract(tmp_path: Path) -> None:
             w = ShardWriter(path, schema, Codec(1, 4), {})
             w.begin_episode(0, 0, 0)
             for t in range(0, 60, 10):
-                obs = render(scene, t)
-                w.add_frame(schema.extract(obs)) if mode == "frame" else w.add_observation(obs)
+                obs = {**render(scene, t), "available_actions": np.array([0, 1, 2, 3 + t])}
+                if mode == "frame":
+                    w.add_frame(schema.extract(obs), obs["available_actions"])
+                else:
+                    w.add_observation(obs)
                 if t:
                     w.add_step(0, [], 0.0)
             w.end_episode()
             w.close()
             paths.append(path)
         assert paths[0].read_bytes() == paths[1].read_bytes()
-    obs = render(scene, 0)
+    obs = {**render(scene, 0), "available_actions": np.array([0])}
     obs["feature_screen"][SCHEMA.screen[6].index, 0, 0] = 70000  # unit_type beyond uint16
     w = ShardWriter(tmp_path / "bad.h5", SCHEMA, Codec(1, 4), {})
     w.begin_episode(7, 0, 0)
@@ -285,7 +288,7 @@ def test_add_observation_equals_add_frame_of_extract(tmp_path: Path) -> None:
         w.add_observation(obs)
     with pytest.raises(ValueError, match="screen/unit_type holds values outside"):
         SCHEMA.extract(obs)
-    obs = render(scene, 0)
+    obs = {**render(scene, 0), "available_actions": np.array([0])}
     obs["feature_minimap"][SCHEMA.minimap[3].index, 5, 5] = -1  # camera: negative
     with pytest.raises(ValueError, match="minimap/camera holds values outside"):
         w.add_observation(obs)
@@ -297,7 +300,7 @@ def test_counts_past_the_nominal_scale_are_kept(tmp_path: Path) -> None:
     real value, and it fits the layer's uint8, so it is stored, not refused."""
     from sc2data.testing.synthetic import _Scene, render
 
-    obs = render(_Scene(3), 0)
+    obs = {**render(_Scene(3), 0), "available_actions": np.array([0])}
     density = next(l for l in SCHEMA.screen if l.name == "unit_density")
     obs["feature_screen"][density.index, 4, 4] = 20
     assert SCHEMA.extract(obs)[density.key][4, 4] == 20

@@ -42,6 +42,9 @@ def test_a_dataloader_with_two_workers_sees_every_stack_once(data: Path) -> None
         assert np.array_equal(batch["function"].numpy(), acts["function"])
         assert np.array_equal(batch["args"].numpy(), acts["args"])
         assert np.allclose(batch["reward"].numpy(), acts["reward"])
+        assert batch["available"].dtype == torch.bool and batch["available"].shape[1] == 573
+        assert np.array_equal(batch["available"].numpy(), acts["available"])
+        assert np.array_equal(batch["next_available"].numpy(), acts["next_available"])
         seen += list(zip(episodes.tolist(), steps.tolist()))
     assert sorted(seen) == sorted(zip(*(a.tolist() for a in ds.locate(0, len(ds)))))
 

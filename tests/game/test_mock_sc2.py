@@ -76,6 +76,8 @@ def test_rollout_verify_label_and_a_live_reward(mock_sc2: None, tmp_path: Path,
         assert code == 0, err
         ds = sc2data.open_dataset(out)
         assert len(ds) == 2 * EPISODE_STEPS and ds.settings["env"] == "sc2"
+        acts = ds.actions(*ds.locate(0, len(ds)))  # the game's action masks are kept
+        assert acts["available"][range(len(ds)), acts["function"]].all()
         code, out_text, err = run_cli(["verify", str(out)], capsys)
         assert code == 0 and "OK" in out_text, err
         code, out_text, err = run_cli(["label", str(out)], capsys)

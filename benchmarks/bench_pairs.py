@@ -2,7 +2,8 @@
 
 1. ``build_pairs`` on labels shaped like the paper recipe's data (2,400 reduced-random episodes of
    1,800 steps, each command firing at the rate measured on the simulator), timed end to end.
-2. Packing: ``sc2data.pairs.pairset._pack_split`` copying a pair set's stacks from a real rolled-out,
+2. Packing: ``sc2data.pairs.pairset._pack_split`` copying a pair set's stacks from a real
+   rolled-out,
    labelled dataset (``--data``, e.g. the demo's ``demo-out/data/rollout``) into a packed file.
 
     python benchmarks/bench_pairs.py --data demo-out/data/rollout --repeats 3

@@ -23,7 +23,7 @@ from pysc2.env import environment  # noqa: E402
 from pysc2.lib import actions, buffs, colors, features, point, units  # noqa: E402
 
 __all__ = ["actions", "base_agent", "buffs", "colors", "environment", "features",
-           "interface_format", "point", "sc2_env", "units"]
+           "interface_format", "point", "sc2_env", "units"]  # noqa: F822  (sc2_env: lazy)
 
 
 def __getattr__(name: str) -> Any:

@@ -68,7 +68,8 @@ def build(recipe: Recipe, out: str | os.PathLike[str], *, workers: int = 1,
           rules_dir: Path | str | None = None) -> BuildReport:
     """Run every stage of ``recipe`` into ``out``; stages already complete are kept.
 
-    ``ray`` (:class:`sc2data.scaleout.driver.RayOptions`): roll out and label as Ray tasks, on one Ray
+    ``ray`` (:class:`sc2data.scaleout.driver.RayOptions`): roll out and label as Ray tasks, on
+    one Ray
     instance or cluster for both stages; the data is the same either way. Grows the data when
     the pair stage finds too few states (see the module's docstring).
     """

@@ -100,7 +100,8 @@ _RULES_DIR_HELP = "Also load the rules defined by the .py files of this folder."
 # -- option groups shared by several commands --------------------------------------------------
 @dataclass(frozen=True)
 class RayArgs:
-    """The ``--ray*`` options as given; :meth:`options` checks them once the worker count is known."""
+    """The ``--ray*`` options as given; :meth:`options` checks them once the worker count is
+    known."""
 
     address: str | None
     retries: int
@@ -127,7 +128,8 @@ RAY = OptionGroup("ray", (
              "ray://HOST:PORT joins a running cluster.")),
     option("ray_retries", int, typer.Option(
         2, "--ray-retries",
-        help="With --ray: extra attempts per task after a worker death, a crashed game or a hang.")),
+        help="With --ray: extra attempts per task after a worker death, a crashed game or a "
+             "hang.")),
     option("ray_timeout", float, typer.Option(
         600.0, "--ray-timeout",
         help="With --ray: seconds a task may go without progress before it is retried.")),

@@ -34,7 +34,6 @@ from sc2data.errors import Sc2DataError
 from sc2data.files import writer
 from sc2data.formats import Shape, check_record, loads
 
-
 DATASET, PAIRSET, RUN, RL_RUN, BUILD = "dataset", "pair set", "training run", "RL run", "build"
 """What :func:`kind` answers."""
 

@@ -172,7 +172,8 @@ class Recipe:
         return d
 
 
-def _check_keys(where: str, table: Mapping[str, Any], allowed: Mapping[str, type | tuple[type, ...]],
+def _check_keys(where: str, table: Mapping[str, Any],
+                allowed: Mapping[str, type | tuple[type, ...]],
                 required: tuple[str, ...] = ()) -> None:
     for key, value in table.items():
         if key not in allowed:

@@ -338,7 +338,8 @@ class StackBatch:
                                     f"again with a layer set that keeps it") from None
 
     def vector(self, name: str, field: str) -> np.ndarray:
-        """``(B, 2)`` array of one field of a non-spatial vector, e.g. ``("player", "minerals")``."""
+        """``(B, 2)`` array of one field of a non-spatial vector, e.g.
+        ``("player", "minerals")``."""
         for v in self.schema.vectors:
             if v.name == name and field in v.fields and name in self.arrays:
                 return self.arrays[name][:, :, v.fields.index(field)]

@@ -6,7 +6,6 @@ line and a non-zero exit, nothing written, driven through the CLI as a user runs
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import subprocess
@@ -18,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from tests.cli import assert_one_line_error, run_cli
-from tests.mem_helpers import tiny_pairset, train_tiny
+from tests.mem_helpers import tiny_pairset
 from tests.synthetic_data import make_dataset
 
 ROOT = Path(__file__).resolve().parents[1]

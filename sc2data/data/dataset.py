@@ -81,7 +81,8 @@ def read_manifest(folder: Path) -> dict[str, Any]:
     try:
         manifest = loads(path.read_text())
     except (OSError, ValueError) as e:
-        raise Sc2DataError(f"{path} is unreadable ({e}); delete the folder and roll out again")
+        raise Sc2DataError(f"{path} is unreadable ({e}); delete the folder and roll out "
+                           f"again") from e
     DATASET.check(manifest, path)
     return manifest
 
@@ -94,7 +95,7 @@ def read_index(folder: Path) -> pa.Table:
     try:
         table = pq.read_table(path)
     except (OSError, pa.ArrowException) as e:
-        raise Sc2DataError(f"{path} is unreadable ({e}); rerun the rollout to rewrite it")
+        raise Sc2DataError(f"{path} is unreadable ({e}); rerun the rollout to rewrite it") from e
     missing = set(INDEX_SCHEMA.names) - set(table.column_names)
     if missing:
         raise Sc2DataError(f"{path} lacks columns {sorted(missing)}; rerun the rollout")

@@ -63,7 +63,8 @@ AgentFactory = Callable[[int], base_agent.BaseAgent]
 ShardRunner = Callable[["RolloutConfig", Path, list[int], EnvFactory, AgentFactory, Bar],
                       dict[int, list[dict[str, Any]]]]
 """Writes the shards ``todo`` elsewhere than in local worker processes (Ray tasks:
-``sc2data.scaleout.driver.RayShards``): ``runner(config, out, todo, env_factory, agent_factory, bar)``,
+``sc2data.scaleout.driver.RayShards``):
+``runner(config, out, todo, env_factory, agent_factory, bar)``,
 each shard through :func:`write_shard`, feeding the progress ``bar``; returns what
 :func:`write_shard` returned, by shard."""
 _SETTINGS_ORDER = ("env", "agent", "episodes", "seed", "layers", "episodes_per_shard", "max_steps",
@@ -188,7 +189,8 @@ def resolve_agent(config: RolloutConfig) -> tuple[RolloutConfig, AgentFactory]:
     """``config`` with the sha256 of what its agent loads, and the agent's factory; one line for
     an unknown agent, or for a checkpoint other than the one the config records (a policy
     trained on since its data was rolled out: that data's agent no longer exists)."""
-    from sc2data.game.agents import AGENTS, resolve_agent as resolve
+    from sc2data.game.agents import AGENTS
+    from sc2data.game.agents import resolve_agent as resolve
 
     spec = resolve(config.agent)
     if config.agent_sha256 not in (None, spec.sha256):
@@ -201,8 +203,8 @@ def resolve_agent(config: RolloutConfig) -> tuple[RolloutConfig, AgentFactory]:
 
 
 # -- one shard ----------------------------------------------------------------------------------
-def play_episode(env: environment.Base, agent: base_agent.BaseAgent, writer: ShardWriter, max_steps: int | None,
-                 report: Callable[[int], None]) -> int:
+def play_episode(env: environment.Base, agent: base_agent.BaseAgent, writer: ShardWriter,
+                 max_steps: int | None, report: Callable[[int], None]) -> int:
     """Play one episode into ``writer``: frame 0, then (action, frame t+1, reward) per step."""
     timestep = env.reset()[0]
     agent.reset()

@@ -18,7 +18,8 @@ Layout, all derived from a :class:`~sc2data.schema.Schema`::
 
 Stack ``t`` of an episode is frames ``frame_start + t`` and ``frame_start + t + 1`` with step
 ``step_start + t``. Every dataset is chunked, Zstd-compressed and fletcher32-checksummed
-(:mod:`sc2data.data.chunks`); the root's attributes describe the shard (schema, versions, settings…).
+(:mod:`sc2data.data.chunks`); the root's attributes describe the shard (schema, versions,
+settings…).
 Nothing written depends on the time or on the worker that wrote it, so a shard's bytes depend on
 its settings and seeds alone.
 """

@@ -384,8 +384,8 @@ def tsne(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None
             bbox=dict(boxstyle="round,pad=0.2", fc="white", alpha=0.8, lw=0)))
     for kind, (marker, _) in style.items():
         if any(m[2] == kind for m in marks):
-            ax.scatter([], [], marker=marker, color="white", edgecolors="black",
-                       label={"canonical": "canonical command", "extra": "--text phrase"}.get(kind, kind))
+            name = {"canonical": "canonical command", "extra": "--text phrase"}.get(kind, kind)
+            ax.scatter([], [], marker=marker, color="white", edgecolors="black", label=name)
     ax.legend(loc="best", fontsize=8, markerscale=1.5)
     ax.set_title(f"MEM embedding space, t-SNE of {len(emb)} {split} states and "
                  f"{len(marks)} commands ({run.name})")

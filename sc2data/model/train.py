@@ -52,8 +52,8 @@ from sc2data.files import (
 from sc2data.formats import Shape, check_record, loads
 from sc2data.model.words import load_word_vectors
 from sc2data.pairs.loader import PairLoader, PairSet
-from sc2data.provenance import versions
 from sc2data.progress import bar as progress_bar
+from sc2data.provenance import versions
 
 CHECKPOINTS = ("best.pt", "last.pt")
 NEXT = ".next"
@@ -258,7 +258,7 @@ def train(cfg: TrainConfig) -> Path:
                                 torch.tensor(float(len(batch)), device=device)])
 
         sentence_state = None
-        if sentences is not None:  # the frozen embeddings of every known text ride in the checkpoint
+        if sentences is not None:  # the frozen embeddings of every known text: in the checkpoint
             sentence_state = sentences.state(known)
             sentence_state["embeddings"] = torch.from_numpy(sentence_state["embeddings"])
         # --- resuming: the model, optimiser and generators as the last finished epoch left them
@@ -275,7 +275,8 @@ def train(cfg: TrainConfig) -> Path:
         with open(run / "metrics.jsonl", "a") as log:
             for epoch in range(first, cfg.epochs + 1):
                 model.train()
-                t0, c0, acc = time.perf_counter(), time.process_time(), torch.zeros(3, device=device)
+                t0, c0 = time.perf_counter(), time.process_time()
+                acc = torch.zeros(3, device=device)
                 with progress_bar(len(train_loader), desc=f"epoch {epoch}/{cfg.epochs}",
                                   unit="batch", show=cfg.progress, leave=False) as bar:
                     for i, batch in enumerate(train_loader.epoch(epoch)):

@@ -33,10 +33,10 @@ from sc2data.errors import Sc2DataError, reason
 from sc2data.files import (
     PARTIAL,
     FolderLock,
-    sha256_file,
     check_out,
     fsync_path,
     publish,
+    sha256_file,
     sha256_files,
     write_atomic,
 )
@@ -96,7 +96,8 @@ def check_texts(recipe: Recipe, rule_commands: dict[str, str]) -> None:
         if rule_text is not None and c.text != rule_text:
             raise Sc2DataError(f"recipe {recipe.name!r}: command {c.id} has text {c.text!r}, but "
                                f"rule {c.id} says {rule_text!r}; use the rule's text in the "
-                               f"recipe and list other wordings as train_paraphrases or paraphrases")
+                               f"recipe and list other wordings as train_paraphrases or "
+                               f"paraphrases")
 
 
 def check_rollout(recipe: Recipe, settings: dict[str, Any], data: Path,
@@ -106,7 +107,8 @@ def check_rollout(recipe: Recipe, settings: dict[str, Any], data: Path,
     claim must be true."""
     spec = spec or recipe.rollout
     differ = [f"{k} {settings.get(k)!r} (recipe: {getattr(spec, k)!r})"
-              for k in ("env", "agent", "layers", "step_mul") if settings.get(k) != getattr(spec, k)]
+              for k in ("env", "agent", "layers", "step_mul")
+              if settings.get(k) != getattr(spec, k)]
     if differ:
         raise Sc2DataError(f"{data} was not rolled out as recipe {recipe.name!r} says: "
                            f"{'; '.join(differ)}; pair it with a recipe that describes it, or "

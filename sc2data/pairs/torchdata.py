@@ -41,7 +41,7 @@ from sc2data.pairs.loader import SPLITS, PairSet
 from sc2data.pairs.packed import BLOCK
 
 try:
-    import torch
+    import torch  # noqa: F401  (present: the loader's tensors)
     from torch.utils.data import Dataset, Sampler
 except ImportError:
     raise MissingDependencyError("torch", "train", "sc2data.pairs.torchdata") from None

@@ -172,7 +172,7 @@ def agreement(run: Path, mem: Path, *, episodes: int = 3, deterministic: bool = 
         for e in range(episodes):
             rule_frames: list[Any] = []
             mem_frames: list[Any] = []
-            for info in play(model, env, AGREEMENT_SEED + e, deterministic):
+            for info in play(model, env, AGREEMENT_SEED + e, deterministic):  # noqa: B007
                 new = env.frames if not rule_frames else env.frames[1:]
                 rule_frames += [rule_schema.extract(f) for f in new]
                 mem_frames += [scorer.schema.extract(f) for f in new]

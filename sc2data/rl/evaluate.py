@@ -34,8 +34,17 @@ import numpy as np
 from sc2data.errors import Sc2DataError
 from sc2data.files import write_atomic
 from sc2data.formats import Shape
-from sc2data.rl.train import (EVAL_SEED, STATE_SHAPE, _read_json, _write_json, game_loops,
-                              load_config, read_config, read_curve, require_rl)
+from sc2data.rl.train import (
+    EVAL_SEED,
+    STATE_SHAPE,
+    _read_json,
+    _write_json,
+    game_loops,
+    load_config,
+    read_config,
+    read_curve,
+    require_rl,
+)
 
 PROTOCOL = 2
 """Version of ``eval.json``: 2 holds sampled and argmax play over seeds of both start sides."""
@@ -170,7 +179,7 @@ def _episodes(policy: Any, env: Any, seeds: Sequence[int], deterministic: bool,
     for seed in seeds:
         policy.set_random_seed(seed)
         info: dict[str, Any] = {}
-        for info in play(policy, env, seed, deterministic):
+        for info in play(policy, env, seed, deterministic):  # noqa: B007  (the last one)
             pass
         marines.append(int(info["marines"]))
         tick()
@@ -263,7 +272,7 @@ def _agent_episodes(name: str, seeds: Sequence[int], episode_steps: int | None,
         env = make_env("sim", seed=game_seed(seed), **kwargs)
         try:
             ts: Any = None
-            for ts in play_agent(env, make_agent(name, seed=seed)):
+            for ts in play_agent(env, make_agent(name, seed=seed)):  # noqa: B007  (the last)
                 pass
             marines.append(int(np.asarray(ts.observation["score_cumulative"])[0]))
         finally:

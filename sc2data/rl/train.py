@@ -21,13 +21,10 @@ seeds from ``EVAL_SEED`` on, a range training never uses while ``seed < 900,000`
 from __future__ import annotations
 
 import dataclasses
-import io
-import json
 import math
 import os
 import shutil
 import typing
-from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -35,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from sc2data.errors import MissingDependencyError, Sc2DataError
-from sc2data.files import FolderLock, check_out, write_atomic, writing
+from sc2data.files import FolderLock, check_out, writing
 from sc2data.formats import Shape, check_record, loads
 from sc2data.rl import runs
 from sc2data.rl.runs import CURVE_FIELDS, STATE_SHAPE  # noqa: F401  (names users import)
@@ -147,10 +144,9 @@ CONFIG_SHAPE: Shape = {name: typing.get_args(hint) or hint for name, hint in
 def check_values(cfg: RLConfig) -> None:
     """One-line error unless every setting of ``cfg`` is one sc2data can run."""
     from sc2data.rl.envs import ACTION_SPACES
+    from sc2data.rl.obs import OBSERVATIONS
     from sc2data.rl.rewards import REWARDS
     from sc2data.vocab import BACKENDS, LAYER_SETS
-
-    from sc2data.rl.obs import OBSERVATIONS
 
     for name, known in (("action_space", ACTION_SPACES), ("reward", REWARDS),
                         ("layers", LAYER_SETS), ("backend", BACKENDS), ("obs", OBSERVATIONS),
@@ -460,7 +456,7 @@ def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path
                 infos, dones = self.locals["infos"], self.locals["dones"]
                 rewards = self.locals["rewards"]
                 buffer = self.model.rollout_buffer
-                if hasattr(buffer, "record_steps"):  # SMDPRolloutBuffer  # before SB3 adds this step
+                if hasattr(buffer, "record_steps"):  # SMDPRolloutBuffer, before SB3 adds the step
                     buffer.record_steps([int(i.get("env_steps", 1)) for i in infos])
                 for i, info in enumerate(infos):
                     state["env_steps"] += int(info.get("env_steps", 1))

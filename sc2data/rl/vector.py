@@ -41,7 +41,7 @@ from sc2data.files import one_line
 from sc2data.game.agents import ReducedRandomAgent
 from sc2data.rl.arena import Arena, Field
 from sc2data.rl.envs import BuildMarinesGym
-from sc2data.rl.obs import ObsConfig, Observer
+from sc2data.rl.obs import ObsConfig
 from sc2data.schema import Schema
 
 MAX_MACRO_STEPS = ReducedRandomAgent.PATIENCE + 4

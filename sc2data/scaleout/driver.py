@@ -432,7 +432,8 @@ def label_on_ray(data: str | os.PathLike[str], options: RayOptions, *,
                  rules_dir: Path | str | None = None, batch_size: int = 256,
                  progress: bool | None = None, overwrite: bool = False
                  ) -> tuple[LabelSummary, ScaleoutReport]:
-    """``sc2data label --ray``: :func:`sc2data.labels.label.label_dataset` with units as Ray tasks."""
+    """``sc2data label --ray``: :func:`sc2data.labels.label.label_dataset` with units as Ray
+    tasks."""
     from sc2data.labels.label import label_dataset
 
     options.validate()

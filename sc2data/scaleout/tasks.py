@@ -1,5 +1,5 @@
-"""What runs inside a Ray task for :mod:`sc2data.scaleout.driver`: one shard or one label unit, and the
-tracker actor the tasks report to.
+"""What runs inside a Ray task for :mod:`sc2data.scaleout.driver`: one shard or one label unit,
+and the tracker actor the tasks report to.
 
 Each attempt of a task registers with the tracker (where it runs), reports its progress at most
 twice a second, and records why it failed before its exception goes back to Ray; the parent reads

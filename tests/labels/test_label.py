@@ -231,7 +231,8 @@ def test_failure_keeps_an_older_complete_labels_file(tmp_path: Path) -> None:
     assert read_labels(tmp_path).meta["counts"]["build_scv"] == 6
 
 
-def test_unwritable_folder_and_concurrent_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_unwritable_folder_and_concurrent_runs(tmp_path: Path,
+                                               monkeypatch: pytest.MonkeyPatch) -> None:
     blocker = tmp_path / "a-file"
     blocker.write_text("")
     with pytest.raises(Sc2DataError, match=r"^cannot write labels in .*a-file/data: "):

@@ -14,7 +14,7 @@ import sc2data.model.evaluate as ev  # noqa: E402
 from sc2data import load_model  # noqa: E402
 from sc2data.model.evaluate import accuracy, auc, evaluate, roc_auc  # noqa: E402
 from sc2data.pairs.loader import PairSet  # noqa: E402
-from tests.cli import assert_one_line_error, run_cli
+from tests.cli import assert_one_line_error, run_cli  # noqa: E402
 from tests.mem_helpers import tiny_pairset, train_tiny  # noqa: E402
 
 

@@ -275,6 +275,6 @@ def test_the_scorer_refuses_inputs_it_cannot_score(tmp_path: Path) -> None:
         "text-vector": (bad("player", good["player"].astype(str)), r"player holds <U\d+ values"),
         "batch": (bad("player", good["player"][:2]), r"disagree on the batch size"),
     }
-    for name, (arrays, message) in cases.items():
+    for arrays, message in cases.values():
         with pytest.raises(Sc2DataError, match=message):
             s.distance(arrays, "build a depot")

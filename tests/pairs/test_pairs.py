@@ -35,7 +35,8 @@ def recipe(**changes: Any) -> Any:
     ((10, (0.5, 0.25, 0.25)), [5, 3, 2]), ((150000, (2 / 3, 1 / 6, 1 / 6)), [100000, 25000, 25000]),
     ((1, (0.6, 0.2, 0.2)), [1, 0, 0]),
 ])
-def test_apportion_is_exact(apportion_in: tuple[int, tuple[float, ...]], expected: list[int]) -> None:
+def test_apportion_is_exact(apportion_in: tuple[int, tuple[float, ...]],
+                            expected: list[int]) -> None:
     assert apportion(*apportion_in) == expected
 
 

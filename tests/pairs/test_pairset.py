@@ -75,7 +75,8 @@ def test_rerun_build_resumes_without_redoing(built: Path, tmp_path: Path) -> Non
     before = (built / "pairs" / "pairset.json").stat().st_mtime_ns
     p = run("build", recipe, "--out", built, "--no-progress")
     assert "0 shards written, 1 kept" in p.stdout
-    assert "up to date" in p.stdout or (built / "pairs" / "pairset.json").stat().st_mtime_ns == before
+    assert ("up to date" in p.stdout
+            or (built / "pairs" / "pairset.json").stat().st_mtime_ns == before)
 
 
 def test_packed_stacks_equal_the_rollout(built: Path) -> None:
@@ -104,7 +105,8 @@ def test_pair_is_deterministic_and_up_to_date(built: Path, tmp_path: Path) -> No
 def test_other_seed_other_pairs(built: Path, tmp_path: Path) -> None:
     recipe = recipe_file(tmp_path, seed="5", episodes="3", states_per_command="3",
                          null_states="12")
-    shutil.copytree(built / "rollout", tmp_path / "data")  # the seed is the recipe's, not the data's
+    # the seed is the recipe's, not the data's
+    shutil.copytree(built / "rollout", tmp_path / "data")
     run("pair", recipe, "--data", tmp_path / "data", "--out", tmp_path / "b", "--no-progress")
     b = pq.read_table(tmp_path / "b" / "pairs.parquet")
     assert not b.equals(pq.read_table(built / "pairs" / "pairs.parquet"))

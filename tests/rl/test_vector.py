@@ -19,8 +19,7 @@ from sc2data.errors import Sc2DataError
 from sc2data.rl import arena
 from sc2data.rl.batched import make_shaping
 from sc2data.rl.envs import PAPER_FUNCTIONS
-from sc2data.rl.train import (RLConfig, check_config, make_env, make_vec_env, policy_kwargs,
-                              train)
+from sc2data.rl.train import RLConfig, check_config, make_env, make_vec_env, policy_kwargs, train
 from sc2data.rl.vector import BuildMarinesVecEnv, BuildMarinesVectorEnv, GameConfig
 from tests.mem_helpers import tiny_pairset, train_tiny
 

@@ -1,6 +1,7 @@
-"""Rollout and label as Ray tasks (``sc2data.scaleout.driver``) on a local 2-CPU Ray instance: the same
-data as a local run, workers killed mid-episode, hung and crashed instances, the retry budget,
-resume, a full disk, the CLI joining a running cluster, and ``--ray`` without Ray installed."""
+"""Rollout and label as Ray tasks (``sc2data.scaleout.driver``) on a local 2-CPU Ray instance:
+the same data as a local run, workers killed mid-episode, hung and crashed instances, the retry
+budget, resume, a full disk, the CLI joining a running cluster, and ``--ray`` without Ray
+installed."""
 
 from __future__ import annotations
 

@@ -32,7 +32,10 @@ import numpy as np
 from sc2data.cliopts import plural
 from sc2data.errors import Sc2DataError
 from sc2data.files import writer
-from sc2data.formats import Shape, check_record, loads
+from sc2data.formats import Shape, loads
+from sc2data.ground.resume import CONFIG, EVAL, STATE, read_record, read_records
+from sc2data.model.runs import METRICS
+from sc2data.rl.runs import CURVE_CSV, MODEL
 
 DATASET, PAIRSET, RUN, RL_RUN, BUILD = "dataset", "pair set", "training run", "RL run", "build"
 """What :func:`kind` answers."""
@@ -41,10 +44,10 @@ DATASET, PAIRSET, RUN, RL_RUN, BUILD = "dataset", "pair set", "training run", "R
 def _rl_run(folder: Path) -> bool:
     """An ``sc2data rl train`` run: a checkpoint or curve of its own, or a ``config.json`` naming
     an action space (what a MEM run's never does)."""
-    if (folder / "model.zip").is_file() or (folder / "curve.csv").is_file():
+    if (folder / MODEL).is_file() or (folder / CURVE_CSV).is_file():
         return True
     try:
-        record = loads((folder / "config.json").read_bytes())
+        record = loads((folder / CONFIG).read_bytes())
     except (OSError, ValueError):  # formats.loads: any depth, one ValueError
         return False
     return isinstance(record, dict) and "action_space" in record
@@ -64,7 +67,7 @@ def kind(folder: Path) -> str:
         return PAIRSET
     if _rl_run(folder):
         return RL_RUN
-    if (folder / "state.json").is_file() or (folder / "config.json").is_file():
+    if (folder / STATE).is_file() or (folder / CONFIG).is_file():
         return RUN
     if (folder / ROLLOUT_DIR / "dataset.json").is_file() or \
             (folder / PAIRS_DIR / "pairset.json").is_file():
@@ -218,15 +221,7 @@ def _records(path: Path, shape: Shape, lines: bool = False) -> list[Any]:
     """A run's JSON file (or its JSON lines), checked to have ``shape``; [] if it is absent."""
     if not path.is_file():
         return []
-    try:
-        text = path.read_text()
-        records = [loads(t, finite=False) for t in text.splitlines()] if lines else \
-            [loads(text, finite=False)]
-    except (OSError, ValueError) as e:
-        raise Sc2DataError(f"{path} is unreadable ({e}); train the run again") from None
-    for r in records:
-        check_record(r, shape, path, "train the run again")
-    return records
+    return read_records(path, shape, "train the run again", lines=lines, finite=False)
 
 
 def _run_info(folder: Path) -> list[str]:
@@ -241,7 +236,7 @@ def _run_info(folder: Path) -> list[str]:
              "settings  " + "  ".join(f"{k}={config.get(k)}" for k in
                                       ("epochs", "batch_size", "lr", "l2", "seed",
                                        "categorical", "pool", "device_used"))]
-    rows = _records(folder / "metrics.jsonl", METRICS_ROW, lines=True)
+    rows = _records(folder / METRICS, METRICS_ROW, lines=True)
     if rows:
         best = min(rows, key=lambda r: r["val_loss"])
         lines += ["", f"{'epoch':>5} {'train loss':>10} {'train acc':>9} {'val loss':>9} "
@@ -249,7 +244,7 @@ def _run_info(folder: Path) -> list[str]:
         lines += [f"{r['epoch']:>5} {r['train_loss']:>10.4f} {r['train_acc']:>9.2%} "
                   f"{r['val_loss']:>9.4f} {r['val_acc']:>8.2%}" + ("  *" if r is best else "")
                   for r in rows]
-    for ev in _records(folder / "eval.json", EVAL_SHAPE):
+    for ev in _records(folder / EVAL, EVAL_SHAPE):
         acc = {s: v.get("accuracy") for s, v in ev.get("splits", {}).items()}
         lines += ["", "eval      " + "  ".join(f"{s} {a:.2%}" for s, a in acc.items()
                                                if isinstance(a, float))]
@@ -320,7 +315,7 @@ def _run(folder: Path) -> tuple[list[str], list[str]]:
 
 
 # -- RL runs -----------------------------------------------------------------------------------
-EVALS = ("eval.json", "eval-stochastic.json")
+EVALS = (EVAL, "eval-stochastic.json")
 """An RL run's evaluation reports (``eval-stochastic.json`` from runs evaluated before both
 modes went into ``eval.json``)."""
 SCORES: Shape = {"mean": float, "std": float}
@@ -336,17 +331,11 @@ def _rl_records(folder: Path) -> tuple[dict[str, Any], dict[str, Any] | None]:
     from sc2data.rl.train import STATE_SHAPE, read_config
 
     config = read_config(folder)
-    path = folder / "state.json"
+    path = folder / STATE
     if not path.is_file():
         return config, None
-    try:
-        state = loads(path.read_text())
-    except (OSError, ValueError) as e:
-        raise Sc2DataError(f"{path} is unreadable ({e}); delete {folder} and train it again, "
-                           f"or pick another --out") from None
-    check_record(state, STATE_SHAPE, path, f"delete {folder} and train it again, or pick "
-                                           f"another --out")
-    return config, state
+    return config, read_record(path, STATE_SHAPE, f"delete {folder} and train it again, or "
+                                                  f"pick another --out")
 
 
 def _rl_evals(folder: Path) -> list[tuple[str, dict[str, Any]]]:
@@ -354,13 +343,8 @@ def _rl_evals(folder: Path) -> list[tuple[str, dict[str, Any]]]:
     for name in EVALS:
         path = folder / name
         if path.is_file():
-            try:
-                record = loads(path.read_text())
-            except (OSError, ValueError) as e:
-                raise Sc2DataError(f"{path} is unreadable ({e}); rerun sc2data rl evaluate "
-                                   f"{folder}") from None
-            check_record(record, EVAL_REPORT, path, f"rerun sc2data rl evaluate {folder}")
-            out.append((name, record))
+            out.append((name, read_record(path, EVAL_REPORT,
+                                          f"rerun sc2data rl evaluate {folder}")))
     return out
 
 
@@ -369,7 +353,7 @@ def _rl_info(folder: Path) -> list[str]:
 
     config, state = _rl_records(folder)
     done = "no checkpoint yet (rerun the same sc2data rl train command to resume)" \
-        if state is None or not (folder / "model.zip").is_file() else \
+        if state is None or not (folder / MODEL).is_file() else \
         (f"{plural(state['timesteps'], 'decision')}, {plural(state['env_steps'], 'pysc2 step')}, "
          f"{plural(state['episodes'], 'episode')}, resumed {plural(state['resumes'], 'time')}")
     narration = config.get("narration") or "the shipped BuildMarines narration"
@@ -384,7 +368,7 @@ def _rl_info(folder: Path) -> list[str]:
     try:
         rows = read_curve(folder)
     except (OSError, ValueError, KeyError) as e:
-        raise Sc2DataError(f"{folder / 'curve.csv'} is unreadable ({e}); rerun the same "
+        raise Sc2DataError(f"{folder / CURVE_CSV} is unreadable ({e}); rerun the same "
                            f"sc2data rl train command to rewrite it") from None
     if rows:
         marines = np.array([r["marines"] for r in rows])
@@ -413,7 +397,7 @@ def _rl(folder: Path) -> tuple[list[str], list[str]]:
         return [str(e)], []
     faults: list[str] = []
     notes: list[str] = []
-    model = folder / "model.zip"
+    model = folder / MODEL
     if state is None or not model.is_file():
         notes.append("no checkpoint yet")
     else:
@@ -437,10 +421,10 @@ def _rl(folder: Path) -> tuple[list[str], list[str]]:
         rows = read_curve(folder)
         if state is not None and rows and max(r["timesteps"] for r in rows) > state["timesteps"] \
                 + config["envs"] * config["rollout"]:
-            faults.append(f"{folder / 'curve.csv'} runs past the {state['timesteps']} decisions "
+            faults.append(f"{folder / CURVE_CSV} runs past the {state['timesteps']} decisions "
                           f"state.json records; rerun the same sc2data rl train command")
     except (OSError, ValueError, KeyError) as e:
-        faults.append(f"{folder / 'curve.csv'} is unreadable ({e}); rerun the same sc2data rl "
+        faults.append(f"{folder / CURVE_CSV} is unreadable ({e}); rerun the same sc2data rl "
                       f"train command to rewrite it")
     faults += _faults_of(lambda: _rl_evals(folder))
     return faults, notes

@@ -1,6 +1,6 @@
 """The package's layout holds: imports flow one way, from the shared ground up through the stages.
 
-Ground (root modules) ← game ← data ← labels ← pairs ← model, with scale-out and testing helpers
+Ground (root modules and ``sc2data.ground``) ← game ← data ← labels ← pairs ← model, with scale-out and testing helpers
 beside the top and the CLI, the build driver and the package's lazy public API above all. A module
 may import its own level or lower ones, never a higher one — at module level or inside a function
 (only imports for type checking are exempt).
@@ -12,7 +12,7 @@ import ast
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "sc2data"
-LEVELS = {"game": 1, "data": 2, "labels": 3, "pairs": 4, "model": 5, "rl": 6, "scaleout": 6,
+LEVELS = {"ground": 0, "game": 1, "data": 2, "labels": 3, "pairs": 4, "model": 5, "rl": 6, "scaleout": 6,
           "testing": 6}
 TOP = {"cli", "commands", "cliopts", "build", "folders", "__init__"}
 """Root modules that sit above every stage: the CLI and its option helpers, the build driver, the

@@ -48,6 +48,7 @@ from sc2data.errors import Sc2DataError, reason
 from sc2data.files import LOCK, PARTIAL, FolderLock, publish, sha256_file, writing
 from sc2data.formats import DATASET
 from sc2data.game import env as envs
+from sc2data.ground.resume import differences, refusal
 from sc2data.progress import Bar
 from sc2data.progress import bar as progress_bar
 from sc2data.provenance import versions
@@ -288,10 +289,6 @@ def manifest_for(config: RolloutConfig) -> dict[str, Any]:
             "versions": versions(), "map": MAP_NAME, "n_shards": config.n_shards}
 
 
-def _differences(a: dict[str, Any], b: dict[str, Any]) -> list[str]:
-    return sorted(k for k in set(a) | set(b) if a.get(k) != b.get(k))
-
-
 def folder_config(out: Path) -> RolloutConfig | None:
     """The settings of the dataset in ``out``, if it holds a readable one: what a rollout into it
     takes for the settings it is not given."""
@@ -313,11 +310,10 @@ def check_folder(config: RolloutConfig, out: Path) -> None:
                                f"sc2data reads and verifies but does not add to (it writes "
                                f"format {DATASET.version}); roll out into a new --out")
         settings = old.get("settings", {})
-        diff = [k for k in _differences(settings, config.settings()) if k != "episodes"
-                and not (k == "agent_sha256" and config.agent_sha256 is None)]  # not resolved yet
+        unresolved = ("agent_sha256",) if config.agent_sha256 is None else ()  # not yet known
+        diff = differences(settings, config.settings(), ignore=("episodes", *unresolved))
         if diff:
-            raise Sc2DataError(f"{out} holds a dataset made with other settings (differs in: "
-                               f"{', '.join(diff)}); use another --out or delete it")
+            raise refusal(out, "a dataset made", diff, "use another --out or delete it")
         if settings.get("episodes", 0) > config.episodes:
             raise Sc2DataError(f"{out} holds {settings['episodes']} episodes (or is growing to "
                                f"them), more than the {config.episodes} asked for; a dataset "

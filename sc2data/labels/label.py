@@ -24,6 +24,7 @@ import pyarrow.parquet as pq
 
 from sc2data.errors import Sc2DataError, reason
 from sc2data.files import FolderLock, write_atomic
+from sc2data.ground.resume import differences
 from sc2data.labels.apply import (
     check_requirements,
     fingerprint,
@@ -197,7 +198,7 @@ def _check_replacing(out: Path, rules: Sequence[Registered], overwrite: bool) ->
     except Sc2DataError:
         return  # damaged labels: relabelling them is the remedy
     new = [e.id for e in rules]
-    if sorted(old) != sorted(new):
+    if differences({"rules": sorted(old)}, {"rules": sorted(new)}):
         raise Sc2DataError(f"{out} already has labels of the rules {', '.join(old)}; this run "
                            f"labels with {', '.join(new)}. Pass --overwrite to replace them (a "
                            f"recipe naming a rule left out then cannot be paired)")

@@ -32,6 +32,7 @@ import numpy as np
 from sc2data.errors import Sc2DataError
 from sc2data.files import check_out, write_atomic
 from sc2data.model.reward import MEMScorer, load_model, pairwise
+from sc2data.model.runs import EVAL, TSNE
 from sc2data.pairs.loader import PairSet
 from sc2data.progress import bar as progress_bar
 from sc2data.vocab import SPLITS
@@ -167,7 +168,7 @@ def evaluate(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = 
 
 def report_path(run: Path, fingerprint: str, own: bool) -> Path:
     """``RUN/eval.json`` for the run's own pair set, ``RUN/eval-<fingerprint[:12]>.json`` else."""
-    return run / ("eval.json" if own else f"eval-{fingerprint[:12]}.json")
+    return run / (EVAL if own else f"eval-{fingerprint[:12]}.json")
 
 
 def _pairset(scorer: MEMScorer, data: str | os.PathLike[str] | None) -> PairSet:
@@ -395,7 +396,7 @@ def tsne(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None
                 bbox={"boxstyle": "round", "facecolor": "white", "edgecolor": "darkred"})
     ax.set_xticks([])
     ax.set_yticks([])
-    path = Path(out) if out else run / "tsne.png"
+    path = Path(out) if out else run / TSNE
     fig.tight_layout()
     _declutter(fig, notes)
     png = io.BytesIO()

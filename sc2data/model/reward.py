@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from sc2data.errors import MissingDependencyError, Sc2DataError
+from sc2data.model.runs import BEST, CHECKPOINTS, CONFIG, STATE
 from sc2data.schema import Schema, StackBatch
 
 
@@ -242,13 +243,13 @@ def load_model(run: str | os.PathLike[str], device: str = "cpu", fast: bool = Tr
         from sc2data.model.train import check_run
 
         check_run(path, allow_unfinished=allow_unfinished)
-        path = path / "best.pt"
+        path = path / BEST
     else:
         _check_file(path, allow_unfinished)
     dev = resolve_device(device)
     model, meta = load_checkpoint(path, dev)
     _check_finite(model, path)
-    if "config" not in meta and (path.parent / "config.json").is_file():
+    if "config" not in meta and (path.parent / CONFIG).is_file():
         from sc2data.model.train import read_config
 
         meta["config"] = read_config(path.parent)
@@ -260,9 +261,9 @@ def _check_file(path: Path, allow_unfinished: bool) -> None:
     should: ``best.pt``, ``last.pt``), else every record of its archive through its CRC-32."""
     import zipfile
 
-    from sc2data.model.train import CHECKPOINTS, STATE_FILE, check_run, read_state
+    from sc2data.model.train import check_run, read_state
 
-    state = read_state(path.parent) if (path.parent / STATE_FILE).is_file() else None
+    state = read_state(path.parent) if (path.parent / STATE).is_file() else None
     if state is not None and (path.name in state["sha256"] or path.name in CHECKPOINTS):
         check_run(path.parent, allow_unfinished=allow_unfinished, files=(path.name,))
         return

@@ -49,19 +49,14 @@ from sc2data.files import (
     writer,
     writing,
 )
-from sc2data.formats import Shape, check_record, loads
+from sc2data.formats import Shape
+from sc2data.ground.resume import differences, read_record, refusal
+from sc2data.model.runs import BEST, CHECKPOINTS, CONFIG, LAST, METRICS, NEXT, RUN_FILES, STATE
 from sc2data.model.words import load_word_vectors
 from sc2data.pairs.loader import PairLoader, PairSet
 from sc2data.progress import bar as progress_bar
 from sc2data.provenance import versions
 
-CHECKPOINTS = ("best.pt", "last.pt")
-NEXT = ".next"
-"""An epoch writes its checkpoints as ``best.pt.next`` / ``last.pt.next``, records them in
-``state.json``, then renames them: a run cut anywhere in between resumes (see ``_settle``)."""
-RUN_FILES = ("config.json", "metrics.jsonl", *CHECKPOINTS, *(c + NEXT for c in CHECKPOINTS),
-             "state.json", "eval.json", "tsne.png")
-STATE_FILE = "state.json"
 RESUME_IGNORES = ("out", "overwrite", "progress", "name")
 """Config fields that may differ between an interrupted run and the rerun that resumes it."""
 
@@ -234,7 +229,7 @@ def train(cfg: TrainConfig) -> Path:
                   "parameters": sum(p.numel() for p in model.parameters() if p.requires_grad),
                   "versions": versions()}
         if resumed is None:
-            write_atomic(run / "config.json", json.dumps(config, indent=2).encode())
+            write_atomic(run / CONFIG, json.dumps(config, indent=2).encode())
         config = json.loads(json.dumps(config))  # plain types only: best.pt loads with weights_only
 
         def step(batch: Any, train: bool) -> torch.Tensor:
@@ -264,15 +259,15 @@ def train(cfg: TrainConfig) -> Path:
         # --- resuming: the model, optimiser and generators as the last finished epoch left them
         best, first = float("inf"), 1
         if resumed is not None:
-            last = torch.load(run / "last.pt", map_location="cpu", weights_only=False)
+            last = torch.load(run / LAST, map_location="cpu", weights_only=False)
             model.load_state_dict(last["model"])
             optimizer.load_state_dict(last["optimizer"])
             torch.set_rng_state(last["torch_rng"])
             np.random.set_state(last["numpy_rng"])
             random.setstate(last["python_rng"])
             best, first = last["best"], last["epoch"] + 1
-            _keep_rows(run / "metrics.jsonl", last["epoch"])
-        with open(run / "metrics.jsonl", "a") as log:
+            _keep_rows(run / METRICS, last["epoch"])
+        with open(run / METRICS, "a") as log:
             for epoch in range(first, cfg.epochs + 1):
                 model.train()
                 t0, c0 = time.perf_counter(), time.process_time()
@@ -309,7 +304,7 @@ def train(cfg: TrainConfig) -> Path:
                 row["best"] = bool(val_loss < best) if vsums[2] else True
                 if row["best"]:
                     best = val_loss if vsums[2] else best
-                    M.save_checkpoint(run / f"best.pt{NEXT}", model, words.words if words else (), {
+                    M.save_checkpoint(run / f"{BEST}{NEXT}", model, words.words if words else (), {
                         "config": config, "epoch": epoch, "val_loss": val_loss,
                         "vectors_source": text_source, "vectors_digest": text_digest,
                         **({"sentences": sentence_state} if sentences else {}),
@@ -321,7 +316,7 @@ def train(cfg: TrainConfig) -> Path:
                                "optimizer": optimizer.state_dict(),
                                "torch_rng": torch.get_rng_state(),
                                "numpy_rng": np.random.get_state(),
-                               "python_rng": random.getstate()}, run / f"last.pt{NEXT}")
+                               "python_rng": random.getstate()}, run / f"{LAST}{NEXT}")
                 _write_state(run, epoch, cfg.epochs)
                 _settle(run, read_state(run))
                 if cfg.progress is not False:
@@ -367,12 +362,11 @@ def _prepare_run(run: Path, cfg: TrainConfig) -> dict[str, Any] | None:
     if state is not None and not state["finished"] and not cfg.overwrite:
         diff = _differs(run, cfg)
         if diff:
-            raise Sc2DataError(f"run folder {run} holds an unfinished run with other settings "
-                               f"(differs in: {', '.join(diff)}); rerun it with its own "
-                               f"settings to resume, or pass --overwrite")
+            raise refusal(f"run folder {run}", "an unfinished run", diff, "rerun it with its own "
+                          "settings to resume, or pass --overwrite")
         _settle(run, state)
-        _keep_rows(run / "metrics.jsonl", int(state["epochs_done"]))  # a row logged after it
-        check_run(run, allow_unfinished=True, files=("config.json", "last.pt", "metrics.jsonl"))
+        _keep_rows(run / METRICS, int(state["epochs_done"]))  # a row logged after it
+        check_run(run, allow_unfinished=True, files=(CONFIG, LAST, METRICS))
         return state
     if not cfg.overwrite:
         what = (f"a finished run with other settings (differs in: {', '.join(_differs(run, cfg))})"
@@ -390,11 +384,10 @@ class RunFinished(Exception):
 
 def _differs(run: Path, cfg: TrainConfig) -> list[str]:
     """The settings of ``cfg`` that differ from those the run in ``run`` was started with."""
-    old, new = read_config(run) or {}, asdict(cfg)
-    # a setting added since the run was started reads as its default
+    new = asdict(cfg)
     default = {f.name: f.default for f in fields(TrainConfig) if f.default is not MISSING}
-    return sorted(k for k in new if k not in RESUME_IGNORES
-                  and old.get(k, default.get(k)) != new[k])
+    return differences(read_config(run) or {}, new, keys=new, ignore=RESUME_IGNORES,
+                       defaults=default)
 
 
 def _keep_rows(path: Path, n: int) -> None:
@@ -407,12 +400,12 @@ def _write_state(run: Path, epoch: int, epochs: int) -> None:
     """Record progress and every run file's sha256, after the files themselves: an epoch's new
     checkpoints (``*.pt.next``) are recorded under their final names, which they take after."""
     sums = {}
-    for n in ("config.json", "metrics.jsonl", *CHECKPOINTS):
+    for n in (CONFIG, METRICS, *CHECKPOINTS):
         path = run / f"{n}{NEXT}" if (run / f"{n}{NEXT}").is_file() else run / n
         if path.exists():
             sums[n] = sha256_file(path)
     state = {"epochs_done": epoch, "epochs": epochs, "finished": epoch == epochs, "sha256": sums}
-    write_atomic(run / STATE_FILE, (json.dumps(state, indent=1) + "\n").encode())
+    write_atomic(run / STATE, (json.dumps(state, indent=1) + "\n").encode())
 
 
 def _settle(run: Path, state: dict[str, Any] | None, *, discard: bool = True) -> None:
@@ -440,30 +433,25 @@ CONFIG_SHAPE: Shape = {"data": str, "epochs": int, "batch_size": int, "lr": floa
 
 
 def _read_record(path: Path, shape: Shape) -> dict[str, Any]:
-    try:
-        record = loads(path.read_text())
-    except (OSError, ValueError) as e:
-        raise Sc2DataError(f"{path} is unreadable ({e}); train again with --overwrite") from None
-    check_record(record, shape, path, "train again with --overwrite")
-    return record
+    return read_record(path, shape, "train again with --overwrite")  # type: ignore[no-any-return]
 
 
 def read_state(run: Path) -> dict[str, Any] | None:
     """``state.json`` of a run folder (None if it has none); one-line error if unreadable."""
-    path = run / STATE_FILE
+    path = run / STATE
     return _read_record(path, STATE_SHAPE) if path.is_file() else None
 
 
 def read_config(run: Path) -> dict[str, Any] | None:
     """``config.json`` of a run folder (None if it has none); one-line error if unreadable."""
-    path = run / "config.json"
+    path = run / CONFIG
     return _read_record(path, CONFIG_SHAPE) if path.is_file() else None
 
 
 def _digest(run: Path, name: str, state: dict[str, Any]) -> str:
     """sha256 of a run file as ``state.json`` recorded it: of ``metrics.jsonl``, its first
     ``epochs_done`` rows (a row logged after the state was recorded is not yet part of it)."""
-    if name != "metrics.jsonl":
+    if name != METRICS:
         return sha256_file(run / name)
     n = int(state.get("epochs_done", 0))
     rows = (run / name).read_bytes().splitlines(keepends=True)[:n]
@@ -471,12 +459,12 @@ def _digest(run: Path, name: str, state: dict[str, Any]) -> str:
 
 
 def check_run(run: Path, *, allow_unfinished: bool = False,
-              files: tuple[str, ...] = ("config.json", "best.pt")) -> dict[str, Any]:
+              files: tuple[str, ...] = (CONFIG, BEST)) -> dict[str, Any]:
     """One-line error unless ``run`` is a run folder whose ``files`` are the bytes training
     wrote, and (unless allowed) a finished one. Returns its state."""
     state = read_state(run)
     if state is None:
-        raise Sc2DataError(f"{run} has no {STATE_FILE}: not a run of this sc2data, or one "
+        raise Sc2DataError(f"{run} has no {STATE}: not a run of this sc2data, or one "
                            f"interrupted before its first epoch; train it again")
     _settle(run, state, discard=False)  # an epoch committed but not yet renamed: finish it
     if not state["finished"] and not allow_unfinished:
@@ -492,5 +480,5 @@ def check_run(run: Path, *, allow_unfinished: bool = False,
                                    f"progress, its files not final yet; read it when that "
                                    f"command has finished")
             raise Sc2DataError(f"{run / name} is missing, damaged or was replaced (its sha256 "
-                               f"differs from {STATE_FILE}); train the run again")
+                               f"differs from {STATE}); train the run again")
     return state

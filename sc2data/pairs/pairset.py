@@ -41,6 +41,7 @@ from sc2data.files import (
     write_atomic,
 )
 from sc2data.formats import PAIRSET, loads
+from sc2data.ground.resume import differences
 from sc2data.labels.apply import labels_fingerprint
 from sc2data.pairs.draw import Labelled, NotEnoughStates, SourceShortage, build_pairs
 from sc2data.pairs.layout import (
@@ -197,7 +198,7 @@ def _same(meta: dict[str, Any], identity: dict[str, Any]) -> bool:
     """The record was drawn from this recipe and these labels: only the fields that decide the
     content count (an earlier sc2data also stored when the labels were made, ``labels_created``)."""
     stored = meta.get("identity")
-    return isinstance(stored, dict) and {k: stored.get(k) for k in identity} == identity
+    return isinstance(stored, dict) and not differences(stored, identity, keys=identity)
 
 
 def _other(out: Path, data: Path, recipe: Recipe, identity: dict[str, Any],
@@ -215,7 +216,7 @@ def _other(out: Path, data: Path, recipe: Recipe, identity: dict[str, Any],
         name = old.get("name") if isinstance(old, dict) else meta.get("recipe_name")
         return f"{out} holds the pair set of recipe {name!r}, not {recipe.name!r}{by}; {remedy}"
     if old != new:
-        differ = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
+        differ = differences(old, new)
         return f"{out} holds a pair set of another version of recipe {recipe.name!r} (differs " \
                f"in: {', '.join(differ)}){by}; {remedy}"
     code = {r.get("id"): r.get("code_sha256") for r in meta.get("labels", {}).get("rules") or []

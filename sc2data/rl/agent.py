@@ -34,8 +34,9 @@ from sc2data.errors import Sc2DataError
 from sc2data.files import sha256_file
 from sc2data.game.agents import AgentSpec, ReducedRandomAgent, register_agent_kind
 from sc2data.game.screen import ScreenView
+from sc2data.rl.runs import MODEL
 
-CHECKPOINT = "model.zip"
+CHECKPOINT = MODEL
 _LOADED: dict[tuple[str, str], tuple[Any, Any]] = {}
 """(run, sha256) → (model, RLConfig), one load per process (a factory makes an agent per
 episode)."""

@@ -39,6 +39,7 @@ import numpy as np
 
 from sc2data.errors import Sc2DataError
 from sc2data.files import write_atomic
+from sc2data.rl.runs import MODEL
 
 AGREEMENT_SEED = 2_000_000
 """First episode seed of an agreement measurement (neither training's nor evaluation's)."""
@@ -155,7 +156,7 @@ def agreement(run: Path, mem: Path, *, episodes: int = 3, deterministic: bool = 
             matched.append(scorer.distances(mb, texts) < limit)
         return np.concatenate(fired), np.concatenate(matched)
 
-    model = MaskablePPO.load(run / "model.zip", device="cpu")
+    model = MaskablePPO.load(run / MODEL, device="cpu")
     loops = cfg.episode_steps * STEP_MUL if cfg.episode_steps else None
     env = BuildMarinesGym(cfg.action_space, backend=cfg.backend, obs=cfg.obs_config(),
                           game_loops=loops)

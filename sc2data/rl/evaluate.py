@@ -34,6 +34,7 @@ import numpy as np
 from sc2data.errors import Sc2DataError
 from sc2data.files import write_atomic
 from sc2data.formats import Shape
+from sc2data.rl.runs import CONFIG, EVAL, MODEL, STATE
 from sc2data.rl.train import (
     EVAL_SEED,
     STATE_SHAPE,
@@ -193,7 +194,7 @@ def evaluate(run: Path, episodes: int = 10, progress: bool | None = None) -> dic
     if episodes < 1:
         raise Sc2DataError("--episodes must be at least 1")
     cfg = load_config(run)
-    state = _read_json(run / "state.json", STATE_SHAPE) if (run / "state.json").is_file() else {}
+    state = _read_json(run / STATE, STATE_SHAPE) if (run / STATE).is_file() else {}
     import torch
     from sb3_contrib import MaskablePPO
 
@@ -202,7 +203,7 @@ def evaluate(run: Path, episodes: int = 10, progress: bool | None = None) -> dic
 
     seeds, sides = eval_seeds(episodes)
     torch.set_num_threads(1)
-    model = MaskablePPO.load(run / "model.zip", device="cpu")
+    model = MaskablePPO.load(run / MODEL, device="cpu")
     env = BuildMarinesGym(cfg.action_space, backend=cfg.backend, obs=cfg.obs_config(),
                           game_loops=game_loops(cfg))
     try:
@@ -215,7 +216,7 @@ def evaluate(run: Path, episodes: int = 10, progress: bool | None = None) -> dic
               "argmax": scores(argmax), "trained_timesteps": state.get("timesteps"),
               "trained_env_steps": state.get("env_steps"), "config": cfg.identity(),
               "protocol": PROTOCOL}
-    _write_json(run / "eval.json", result)
+    _write_json(run / EVAL, result)
     return result
 
 
@@ -224,7 +225,7 @@ def read_eval(run: Path) -> dict[str, Any]:
     writes it when it is missing, older, or stale (the model trained on since)."""
     from sc2data.formats import check_record, loads
 
-    path = run / "eval.json"
+    path = run / EVAL
     redo = f"run sc2data rl evaluate {run}"
     try:
         record = loads(path.read_bytes())
@@ -236,8 +237,8 @@ def read_eval(run: Path) -> dict[str, Any]:
         raise Sc2DataError(f"{path} is from an older evaluation protocol (no sampled and argmax "
                            f"play over both start sides); {redo}")
     check_record(record, EVAL_SHAPE, path, redo)
-    if (run / "state.json").is_file():
-        trained = _read_json(run / "state.json", STATE_SHAPE)["timesteps"]
+    if (run / STATE).is_file():
+        trained = _read_json(run / STATE, STATE_SHAPE)["timesteps"]
         if record.get("trained_timesteps") != trained:
             raise Sc2DataError(f"{path} evaluated the model at {record.get('trained_timesteps')} "
                                f"decisions, it has trained {trained} since; {redo}")
@@ -392,7 +393,7 @@ def plot(runs: Sequence[Path], out: Path, window: int = 10, group: bool = False,
     is told. ``baselines_file``: reference agents as horizontal lines."""
     curves = []
     for run in runs:
-        if not (run / "config.json").is_file():
+        if not (run / CONFIG).is_file():
             raise Sc2DataError(f"{run} is not an sc2data rl run (no config.json)")
         rows = read_curve(run)
         if not rows:

@@ -32,13 +32,13 @@ from typing import Any
 
 from sc2data.errors import Sc2DataError
 from sc2data.files import sha256_file, write_atomic
+from sc2data.formats import Shape, loads
+from sc2data.ground import resume
+from sc2data.ground.resume import CONFIG, EVAL, STATE
 
-__all__ = ["sha256_file"]
-from sc2data.formats import Shape, check_record, loads
+__all__ = ["CONFIG", "EVAL", "STATE", "sha256_file"]
 
-CONFIG = "config.json"
 MODEL = "model.zip"
-STATE = "state.json"
 CURVE_CSV = "curve.csv"
 CURVE_JSON = "curve.json"
 LOGS = "logs"
@@ -60,12 +60,7 @@ def remedy(run: Path) -> str:
 
 def read_record(path: Path, shape: Shape, run: Path) -> dict[str, Any]:
     """A run record, parsed (any depth, one line) and checked to have ``shape``."""
-    try:
-        record = loads(path.read_bytes())
-    except (OSError, ValueError) as e:
-        raise Sc2DataError(f"cannot read {path}: {e}; {remedy(run)}") from None
-    check_record(record, shape, path, remedy(run))
-    return record  # type: ignore[no-any-return]
+    return resume.read_record(path, shape, remedy(run))  # type: ignore[no-any-return]
 
 
 def write_record(path: Path, data: Any) -> None:

@@ -33,7 +33,8 @@ import numpy as np
 
 from sc2data.errors import MissingDependencyError, Sc2DataError
 from sc2data.files import FolderLock, check_out, writing
-from sc2data.formats import Shape, check_record, loads
+from sc2data.formats import Shape
+from sc2data.ground.resume import differences, read_record, refusal
 from sc2data.rl import runs
 from sc2data.rl.runs import CURVE_FIELDS, STATE_SHAPE  # noqa: F401  (names users import)
 
@@ -334,17 +335,8 @@ def _write_json(path: Path, data: Any) -> None:
 def read_config(run: Path) -> dict[str, Any]:
     """A run's ``config.json``, checked; settings added since it was written read as the run
     had them (:attr:`RLConfig.LEGACY`)."""
-    path = run / "config.json"
-    try:
-        record = loads(path.read_bytes())
-    except (OSError, ValueError) as e:
-        raise Sc2DataError(f"cannot read {path}: {e}; delete {run} and train it again, or pick "
-                           f"another --out") from None
-    if isinstance(record, dict):
-        record = {**RLConfig.LEGACY, **record}
-    check_record(record, CONFIG_SHAPE, path, f"delete {run} and train it again, or pick "
-                                             f"another --out")
-    return record  # type: ignore[no-any-return]
+    return read_record(run / runs.CONFIG, CONFIG_SHAPE, runs.remedy(run),  # type: ignore[no-any-return]
+                       defaults=RLConfig.LEGACY)
 
 
 read_curve = runs.read_curve
@@ -393,11 +385,10 @@ def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path
     if (run / runs.CONFIG).is_file():
         old = read_config(run)
         old_inputs = old.pop("inputs", None)
-        if old != cfg.identity():
-            diff = sorted(k for k in set(old) | set(cfg.identity())
-                          if old.get(k) != cfg.identity().get(k))
-            raise Sc2DataError(f"{run} holds a run with other settings ({', '.join(diff)}); "
-                               f"rerun with the same options to resume, or pick another --out")
+        diff = differences(old, cfg.identity())
+        if diff:
+            raise refusal(run, "a run", diff, "rerun with the same options to resume, or pick "
+                          "another --out")
         if old_inputs is not None and old_inputs != identity["inputs"]:
             what = sorted(k.replace("_sha256", "") for k in set(old_inputs) | set(
                 identity["inputs"]) if old_inputs.get(k) != identity["inputs"].get(k))
@@ -519,7 +510,7 @@ def summary_line(run: Path, seconds: float | None = None) -> str:
 def load_config(run: Path) -> RLConfig:
     """The settings of a trained run (its ``config.json``), its checkpoint checked by content
     (every reader of a run's model opens it through here)."""
-    if not (run / "config.json").is_file() or not (run / "model.zip").is_file():
+    if not (run / runs.CONFIG).is_file() or not (run / runs.MODEL).is_file():
         raise Sc2DataError(f"{run} is not a trained sc2data rl run (no config.json and "
                            f"model.zip); train one with sc2data rl train --out {run}")
     runs.read_state(run)  # the model (and curve) must be what the last checkpoint recorded

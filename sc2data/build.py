@@ -18,7 +18,6 @@ episodes an earlier build grew it to.
 
 from __future__ import annotations
 
-import contextlib
 import os
 import shutil
 import time
@@ -152,23 +151,12 @@ def _stages(recipe: Recipe, config: RolloutConfig, out: Path, data: Path, report
 def _data(recipe: Recipe, config: RolloutConfig, data: Path, report: BuildReport, workers: int,
           progress: bool | None, ray: RayOptions | None, rules_dir: Path | str | None) -> None:
     """Roll out and label ``config``'s data (on one Ray instance or cluster with ``ray``)."""
-    from sc2data.data.rollout import check_folder, rollout
-    from sc2data.labels.label import label_dataset
+    from sc2data.scaleout.where import run_label, run_rollout, session
 
-    with contextlib.ExitStack() as stack:
-        if ray is not None:
-            from sc2data.scaleout.driver import connect, label_on_ray, rollout_on_ray
-
-            config.validate()
-            check_folder(config, data)  # before Ray starts for nothing
-            stack.enter_context(connect(ray))
-
+    with session(ray, config, data):  # one Ray instance for both stages, with --ray
         t = time.perf_counter()
-        if ray is None:
-            r = rollout(config, data, workers=workers, progress=progress)
-        else:
-            r, retries = rollout_on_ray(config, data, ray, progress=progress)
-            report.lines += retries.lines() if retries.tasks else []
+        r, retries = run_rollout(config, data, workers=workers, progress=progress, ray=ray)
+        report.lines += retries
         report.add("rollout", t)
         grew = f", grown from {r.grew_from}" if r.grew_from is not None else ""
         report.lines.append(f"rollout: {plural(r.episodes, 'episode')}{grew}, "
@@ -176,12 +164,8 @@ def _data(recipe: Recipe, config: RolloutConfig, data: Path, report: BuildReport
                             f"written, {r.shards_kept} kept)")
 
         t = time.perf_counter()
-        if ray is None:
-            labels = label_dataset(data, include=list(recipe.rule_ids), progress=progress,
-                                   workers=workers, rules_dir=rules_dir)
-        else:
-            labels, retries = label_on_ray(data, ray, include=list(recipe.rule_ids),
-                                           progress=progress, rules_dir=rules_dir)
-            report.lines += retries.lines() if retries.tasks else []
+        labels, retries = run_label(data, workers=workers, ray=ray, include=list(recipe.rule_ids),
+                                    progress=progress, rules_dir=rules_dir)
+        report.lines += retries
         report.add("label", t)
         report.lines.append(labels.table())

@@ -178,22 +178,15 @@ def label(
 ) -> None:
     """Label every stack of DATA with the rules; writes labels.parquet and stack_labels.parquet."""
     from sc2data.folders import expect_dataset
-    from sc2data.labels.label import label_dataset
     from sc2data.labels.registry import parse_ids
+    from sc2data.scaleout.where import run_label
 
     expect_dataset(data)
     selection = {"include": parse_ids(rules), "exclude": parse_ids(exclude) or [],
                  "rules_dir": rules_dir, "batch_size": batch_size, "progress": progress,
                  "overwrite": overwrite}
-    lines: list[str] = []
-    options = ray.options() if ray else None
-    if options is not None:
-        from sc2data.scaleout.driver import label_on_ray
-
-        summary, report = label_on_ray(data, options, **selection)
-        lines = report.lines() if report.tasks else []
-    else:
-        summary = label_dataset(data, workers=workers, **selection)
+    summary, lines = run_label(data, workers=workers, ray=ray.options() if ray else None,
+                               **selection)
     if summary.up_to_date:
         typer.echo("labels are up to date (same rules, same data)")
     typer.echo(summary.table())
@@ -315,8 +308,8 @@ def rollout(
     from dataclasses import replace
 
     from sc2data.data.rollout import RolloutConfig, folder_config
-    from sc2data.data.rollout import rollout as run
     from sc2data.errors import Sc2DataError
+    from sc2data.scaleout.where import run_rollout
 
     given = {k: v for k, v in {"env": env, "agent": agent, "episodes": episodes, "seed": seed,
                                "layers": layers}.items() if v is not None}
@@ -332,15 +325,8 @@ def rollout(
     else:
         base = folder_config(out)
         config = replace(base, **given, **extra) if base else RolloutConfig(**given, **extra)
-    lines: list[str] = []
-    options = ray.options(workers) if ray else None
-    if options is not None:
-        from sc2data.scaleout.driver import rollout_on_ray
-
-        s, report = rollout_on_ray(config, out, options, progress=progress)
-        lines = report.lines() if report.tasks else []
-    else:
-        s = run(config, out, workers=1 if workers is None else workers, progress=progress)
+    s, lines = run_rollout(config, out, workers=1 if workers is None else workers,
+                           progress=progress, ray=ray.options(workers) if ray else None)
     grew = f", grown from {s.grew_from}" if s.grew_from is not None else ""
     typer.echo(f"{s.out}: {plural(s.episodes, 'episode')}{grew}, {plural(s.steps, 'stack')} in "
                f"{s.seconds:.1f} s ({plural(s.shards_written, 'shard')} written, "

@@ -55,68 +55,105 @@ def require_rl(purpose: str) -> None:
 
 @dataclass(frozen=True)
 class RLConfig:
-    """Everything that defines a training run (``steps`` and ``progress`` may change on resume)."""
+    """Everything that defines a training run (``steps`` and ``progress`` may change on resume).
+
+    ``sc2data rl train`` takes one option per field (``--batch-size`` for ``batch_size``), its
+    default the field's and its help the docstring under it
+    (:func:`sc2data.cliopts.config_options`): a new field is a new option, with no edit to the
+    command line.
+    """
 
     out: str
+    """Run folder (rerun the same command to resume)."""
     action_space: str = "macro"
+    """macro (6 macro actions) or paper (pysc2 function + screen point)."""
     reward: str = "sparse"
+    """sparse, rules, narration or zero (a control: no reward)."""
     narration: str | None = None
+    """Narration file (TOML or one command per line) [default: the shipped BuildMarines
+    narration]."""
     mem: str | None = None
+    """Trained MEM run (sc2data train --out), for --reward narration."""
     steps: int = 10_000
+    """Decisions to train for, over all envs."""
     envs: int = 16
-    """Games stepped together: one batched policy call and one batched reward per step."""
+    """Games stepped together (one batched policy and reward call per step)."""
     seed: int = 0
+    """Seed of the policy and the environments."""
     bonus: float | None = None
-    """Shaping bonus per rule firing (rules, default 0.1) or per matched command (narration, 1)."""
+    """Shaping bonus: per rule firing (rules) or per matched command (narration) [default: 0.1
+    rules, 1.0 narration]."""
     threshold: float = 0.5
+    """MEM distance below which a command is matched."""
     patience: int = 0
+    """Skip a narration command not matched within this many decisions (0: never)."""
     shaping: str = "event"
-    """How the rules and narration rewards pay their bonus: ``event`` (each firing or match) or
-    ``potential`` (γ·Φ(s') − Φ(s) with the run's ``gamma``; :mod:`sc2data.rl.rewards`)."""
+    """How rules/narration pay their bonus: event (each firing or match) or potential
+    (gamma*phi(s') - phi(s): cannot be farmed)."""
+    # potential: γ·Φ(s') − Φ(s) with the run's gamma (sc2data.rl.rewards).
     episode_steps: int | None = None
-    """pysc2 steps per episode (simulator only); None: the map's 1,800."""
+    """pysc2 steps per episode on the simulator [default: 1800]."""
     rollout: int = 64
-    """PPO rollout length per env (SB3's ``n_steps``)."""
+    """PPO rollout length per env."""
+    # SB3's n_steps.
     batch_size: int = 256
+    """PPO minibatch size."""
     checkpoint_every: int = 2048
+    """Decisions between checkpoints."""
     layers: str = "paper"
+    """Layers of the stored observation (--obs stored): paper (the paper's 13 + 7) or full (all
+    27 + 11)."""
     backend: str = "sim"
+    """The game: sim (the embedded simulator) or sc2 (StarCraft II; needs the game)."""
     obs: str = "compact"
-    """What the policy sees (:mod:`sc2data.rl.obs`): ``compact`` or ``stored``."""
+    """What the policy sees: compact (one-hot unit types, few layers) or stored (the stored
+    schema's layers)."""
+    # sc2data.rl.obs.
     obs_size: int = 32
-    """``compact``: 64 or 32 pixels a side."""
+    """compact: 64 or 32 pixels a side."""
     minimap: bool = False
-    """``compact``: add the minimap's channels."""
+    """compact: add the minimap's channels."""
     processes: int | None = None
-    """Worker processes stepping the games (0: in this process); None: one per core, none for
-    one env. Changes nothing but speed, so it may differ on resume."""
+    """Worker processes stepping the games (0: in this process) [default: one per core; none
+    for one env]."""
+    # Changes nothing but speed, so it may differ on resume.
     device: str = "auto"
-    """Where the policy and the MEM run: ``cpu``, ``cuda`` or ``auto`` (cuda where present)."""
+    """Policy and MEM on cpu, cuda or auto (cuda where a GPU is present)."""
     threads: int | None = None
-    """Torch threads of the learner (policy, MEM, PPO's updates); None: one per core. The
-    games' workers wait while the learner works, so its threads take no core from them: two
-    threads halved an update on this project's 2-core machine (BENCHMARKS.md, "RL at speed")."""
+    """Torch threads of the learner (policy, MEM, updates) [default: one per core]."""
+    # The games' workers wait while the learner works, so its threads take no core from them:
+    # two threads halved an update on this project's 2-core machine (BENCHMARKS.md, "RL at
+    # speed").
     policy: str = "auto"
-    """``spatial`` (the paper space: a point given the function, :mod:`sc2data.rl.spatial`),
-    ``independent`` (SB3's heads: function, x and y apart) or ``auto``: spatial for the paper
-    space on the compact observation, independent otherwise."""
+    """spatial (paper space: the point given the function), independent (SB3's heads) or
+    auto."""
+    # spatial: sc2data.rl.spatial; auto: spatial for the paper space on the compact
+    # observation, independent otherwise.
     gamma: float = 0.99
+    """PPO discount (per pysc2 step with --smdp)."""
     gae_lambda: float = 0.95
+    """GAE lambda."""
     epochs: int = 4
     """PPO epochs over each rollout."""
     ent_coef: float = 0.01
+    """Entropy bonus coefficient."""
     normalize_advantage: bool = False
-    """Advantages normalised per minibatch (SB3's default): with a value function that explains
-    nothing yet, each update is then a full clipped step of noise, and a zero-reward control
-    drifts from its initial policy (tests/rl/test_control.py)."""
+    """Normalise advantages per minibatch (SB3's default; off: a zero-reward control then stays
+    where it started)."""
+    # With a value function that explains nothing yet, each update is then a full clipped step
+    # of noise, and a zero-reward control drifts from its initial policy
+    # (tests/rl/test_control.py).
     target_kl: float | None = 0.05
-    """Stop an update's epochs early once the policy moved this far (approximate KL)."""
+    """Stop an update's epochs once the policy moved this far (0: never)."""
+    # Approximate KL; 0 is kept as None (never).
     smdp: bool = True
-    """Discount a decision of k pysc2 steps by γᵏ (:mod:`sc2data.rl.smdp`); the same as γ in
-    the paper space, where every decision is one step."""
+    """Discount a decision of k pysc2 steps by gamma^k."""
+    # The same as gamma in the paper space, where every decision is one step
+    # (sc2data.rl.smdp).
     tensorboard: bool = False
-    """Also write SB3's log as TensorBoard events (``RUN/logs/<session>/``)."""
+    """Also write SB3's log as TensorBoard events (RUN/logs/<session>/; needs tensorboard)."""
     progress: bool | None = None
+    """Progress bar [default: on a terminal]."""
 
     RESUMABLE = ("steps", "progress", "out", "processes", "device", "threads", "tensorboard")
     LEGACY: typing.ClassVar[dict[str, Any]] = {
@@ -125,6 +162,10 @@ class RLConfig:
         "target_kl": None, "smdp": False, "shaping": "event"}
     """Settings added since runs were first written, as those runs had them: a run folder whose
     ``config.json`` lacks one was trained so."""
+
+    def __post_init__(self) -> None:
+        if self.target_kl == 0:  # 0: never stop early, as None
+            object.__setattr__(self, "target_kl", None)
 
     def obs_config(self) -> Any:
         from sc2data.rl.obs import ObsConfig

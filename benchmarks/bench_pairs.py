@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
+from sc2data.ground.recipe import load
 from sc2data.pairs.draw import Labelled, build_pairs
-from sc2data.recipe import load
 
 ROOT = Path(__file__).resolve().parents[1]
 # Fire rates per stack measured on 20 reduced-random episodes (smoke recipe, seed 0).

@@ -25,10 +25,10 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from sc2data.cliopts import plural
-from sc2data.errors import Sc2DataError, reason
-from sc2data.files import LOCK, FolderLock, check_out
-from sc2data.recipe import MAX_EPISODES, Recipe
+from sc2data.cli.cliopts import plural
+from sc2data.ground.errors import Sc2DataError, reason
+from sc2data.ground.files import LOCK, FolderLock, check_out
+from sc2data.ground.recipe import MAX_EPISODES, Recipe
 
 if TYPE_CHECKING:
     from sc2data.data.rollout import RolloutConfig

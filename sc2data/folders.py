@@ -29,10 +29,10 @@ from typing import Any
 
 import numpy as np
 
-from sc2data.cliopts import plural
-from sc2data.errors import Sc2DataError
-from sc2data.files import writer
-from sc2data.formats import Shape, loads
+from sc2data.cli.cliopts import plural
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import writer
+from sc2data.ground.formats import Shape, loads
 from sc2data.ground.resume import CONFIG, EVAL, STATE, read_record, read_records
 from sc2data.model.runs import METRICS
 from sc2data.rl.runs import CURVE_CSV, MODEL
@@ -182,8 +182,8 @@ def _dataset_info(folder: Path) -> list[str]:
 
 
 def _pairset_info(folder: Path) -> list[str]:
+    from sc2data.ground.vocab import SPLITS
     from sc2data.pairs.loader import PairSet
-    from sc2data.vocab import SPLITS
 
     p = PairSet(folder)
     meta = p.meta
@@ -277,8 +277,8 @@ def _pairset_faults(folder: Path) -> tuple[list[str], list[str]]:
 
 
 def _pairset(folder: Path) -> list[str]:
+    from sc2data.ground.vocab import SPLITS
     from sc2data.pairs.loader import PairSet
-    from sc2data.vocab import SPLITS
 
     try:
         pairs = PairSet(folder)

@@ -2,8 +2,9 @@
 
 Shard ``i`` holds episodes ``[i·E, (i+1)·E)`` and episode ``e`` is seeded from ``(seed, e)``
 alone, so the data never depends on the number of workers. K worker processes each write whole
-shards as ``*.h5.partial`` and rename them when complete and fsynced (:mod:`sc2data.workers`);
-the parent shows one progress bar fed by the workers, and writes ``index.parquet`` last.
+shards as ``*.h5.partial`` and rename them when complete and fsynced
+(:mod:`sc2data.ground.workers`); the parent shows one progress bar fed by the workers, and writes
+``index.parquet`` last.
 Rerunning the same command after an interruption (Ctrl-C, ``kill -9``) deletes stale partials,
 keeps the complete shards and finishes the rest; other settings in the same folder are refused.
 
@@ -29,7 +30,6 @@ from typing import Any
 
 import numpy as np
 
-from sc2data._pysc2 import base_agent, environment
 from sc2data.data.audit import check_shard
 from sc2data.data.chunks import Codec
 from sc2data.data.dataset import (
@@ -44,18 +44,19 @@ from sc2data.data.dataset import (
     write_manifest,
 )
 from sc2data.data.shards import Shard, ShardWriter
-from sc2data.errors import Sc2DataError, reason
-from sc2data.files import LOCK, PARTIAL, FolderLock, publish, sha256_file, writing
-from sc2data.formats import DATASET
 from sc2data.game import env as envs
+from sc2data.ground._pysc2 import base_agent, environment
+from sc2data.ground.errors import Sc2DataError, reason
+from sc2data.ground.files import LOCK, PARTIAL, FolderLock, publish, sha256_file, writing
+from sc2data.ground.formats import DATASET
+from sc2data.ground.progress import Bar
+from sc2data.ground.progress import bar as progress_bar
+from sc2data.ground.provenance import versions
+from sc2data.ground.recipe import MAX_EPISODES, Recipe, RolloutSpec
 from sc2data.ground.resume import differences, refusal
-from sc2data.progress import Bar
-from sc2data.progress import bar as progress_bar
-from sc2data.provenance import versions
-from sc2data.recipe import MAX_EPISODES, Recipe, RolloutSpec
-from sc2data.schema import Schema
-from sc2data.vocab import BACKENDS, EPISODE_STEPS, LAYER_SETS, MAP_NAME
-from sc2data.workers import run_parallel
+from sc2data.ground.schema import Schema
+from sc2data.ground.vocab import BACKENDS, EPISODE_STEPS, LAYER_SETS, MAP_NAME
+from sc2data.ground.workers import run_parallel
 
 EnvFactory = Callable[[int], environment.Base]
 """``seed -> environment.Base`` (a pysc2 environment) for one episode."""
@@ -120,8 +121,8 @@ class RolloutConfig(RolloutSpec):
 
     @classmethod
     def from_recipe(cls, recipe: Recipe, **overrides: Any) -> RolloutConfig:
-        """The rollout settings of a parsed recipe (:func:`sc2data.recipe.load`) of one source;
-        a recipe of several says in one line how to roll each out."""
+        """The rollout settings of a parsed recipe (:func:`sc2data.ground.recipe.load`) of one
+        source; a recipe of several says in one line how to roll each out."""
         if recipe.sources:
             each = "; ".join(f"sc2data rollout --agent {s.rollout.agent} --episodes "
                              f"{s.rollout.episodes} --seed {recipe.seed} --out DIR/{s.name}"

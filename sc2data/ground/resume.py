@@ -22,8 +22,8 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
-from sc2data.errors import Sc2DataError
-from sc2data.formats import Shape, check_record, loads
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.formats import Shape, check_record, loads
 
 CONFIG = "config.json"
 """A run's settings, as it was started (MEM and RL runs)."""

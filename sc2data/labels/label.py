@@ -22,8 +22,9 @@ from typing import Any
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from sc2data.errors import Sc2DataError, reason
-from sc2data.files import FolderLock, write_atomic
+from sc2data.ground.errors import Sc2DataError, reason
+from sc2data.ground.files import FolderLock, write_atomic
+from sc2data.ground.progress import Bar
 from sc2data.ground.resume import differences
 from sc2data.labels.apply import (
     check_requirements,
@@ -48,7 +49,6 @@ from sc2data.labels.store import (
     read_meta,
     write_labels,
 )
-from sc2data.progress import Bar
 
 PARTS_DIR = ".labels-parts"
 DEFAULT_BATCH = 256
@@ -128,8 +128,8 @@ def label(source: Source, rules: Sequence[Registered], out_dir: Path | str, *,
 
 def _run(source: Source, rules: Sequence[Registered], out: Path, fp: str, batch_size: int,
          progress: bool | None, run_units: UnitRunner | None = None) -> LabelSummary:
-    from sc2data.progress import bar as progress_bar
-    from sc2data.provenance import versions
+    from sc2data.ground.progress import bar as progress_bar
+    from sc2data.ground.provenance import versions
 
     keys = required_keys(rules, source.schema)
     parts = out / PARTS_DIR

@@ -10,12 +10,12 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from sc2data.errors import Sc2DataError
-from sc2data.files import PARTIAL
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import PARTIAL
+from sc2data.ground.progress import Bar
 from sc2data.labels.apply import fingerprint, parts_run, write_part
 from sc2data.labels.registry import Registered
 from sc2data.labels.source import Source, Unit, dataset_source
-from sc2data.progress import Bar
 
 Selection = tuple[tuple[str, ...] | None, tuple[str, ...], str | None]
 """``(include, exclude, rules_dir)``: how a process re-selects the run's rules."""
@@ -66,7 +66,7 @@ class LocalUnits:
 
     def __call__(self, todo: Sequence[tuple[Unit, Path]], keys: Sequence[str], batch_size: int,
                  bar: Bar) -> None:
-        from sc2data.workers import run_parallel
+        from sc2data.ground.workers import run_parallel
 
         if not todo:
             return

@@ -29,13 +29,13 @@ from typing import Any
 
 import numpy as np
 
-from sc2data.errors import Sc2DataError
-from sc2data.files import check_out, write_atomic
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import check_out, write_atomic
+from sc2data.ground.progress import bar as progress_bar
+from sc2data.ground.vocab import SPLITS
 from sc2data.model.reward import MEMScorer, load_model, pairwise
 from sc2data.model.runs import EVAL, TSNE
 from sc2data.pairs.loader import PairSet
-from sc2data.progress import bar as progress_bar
-from sc2data.vocab import SPLITS
 
 PAPER = {"train": 0.9561, "val": 0.8235, "test": 0.8040}
 """The paper's accuracies (Waytowich et al. 2019, §4)."""
@@ -120,7 +120,7 @@ def evaluate(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = 
     the one the run was trained on (another fingerprint: re-split or re-drawn, so its test split may
     hold training states) is refused unless ``other_data``; its report then goes to
     ``RUN/eval-<fingerprint>.json`` and the run's own ``eval.json`` is kept. ``progress``: a
-    bar per split embedded (see :func:`sc2data.progress.bar`).
+    bar per split embedded (see :func:`sc2data.ground.progress.bar`).
     """
     run = Path(run)
     scorer = load_model(run, device, allow_unfinished=allow_unfinished)

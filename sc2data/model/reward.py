@@ -21,7 +21,7 @@ threads against 11 ms on one (setting the threads and back costs ~0.3 ms of that
 What comes in is checked as the CLI checks it: a checkpoint by content when it loads (see
 :func:`load_model`), and the stacks on every call — every key the model reads, with the shape and
 an integer dtype per layer, ids within each layer's range, and finite vectors — so that a bad input
-is a :class:`~sc2data.errors.Sc2DataError` naming it, never a NaN or silently wrong distance.
+is a :class:`~sc2data.ground.errors.Sc2DataError` naming it, never a NaN or silently wrong distance.
 """
 
 from __future__ import annotations
@@ -34,9 +34,9 @@ from typing import Any
 
 import numpy as np
 
-from sc2data.errors import MissingDependencyError, Sc2DataError
+from sc2data.ground.errors import MissingDependencyError, Sc2DataError
+from sc2data.ground.schema import Schema, StackBatch
 from sc2data.model.runs import BEST, CHECKPOINTS, CONFIG, STATE
-from sc2data.schema import Schema, StackBatch
 
 
 class MEMScorer:

@@ -37,8 +37,8 @@ from typing import Any
 
 import numpy as np
 
-from sc2data.errors import MissingDependencyError, Sc2DataError, reason
-from sc2data.files import (
+from sc2data.ground.errors import MissingDependencyError, Sc2DataError, reason
+from sc2data.ground.files import (
     LOCK,
     PARTIAL,
     FolderLock,
@@ -49,13 +49,13 @@ from sc2data.files import (
     writer,
     writing,
 )
-from sc2data.formats import Shape
+from sc2data.ground.formats import Shape
+from sc2data.ground.progress import bar as progress_bar
+from sc2data.ground.provenance import versions
 from sc2data.ground.resume import differences, read_record, refusal
 from sc2data.model.runs import BEST, CHECKPOINTS, CONFIG, LAST, METRICS, NEXT, RUN_FILES, STATE
 from sc2data.model.words import load_word_vectors
 from sc2data.pairs.loader import PairLoader, PairSet
-from sc2data.progress import bar as progress_bar
-from sc2data.provenance import versions
 
 RESUME_IGNORES = ("out", "overwrite", "progress", "name")
 """Config fields that may differ between an interrupted run and the rerun that resumes it."""

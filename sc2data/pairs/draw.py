@@ -37,9 +37,9 @@ from dataclasses import dataclass
 import numpy as np
 import pyarrow as pa
 
-from sc2data.errors import Sc2DataError
-from sc2data.recipe import Command, Recipe, apportion
-from sc2data.vocab import SPLITS
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.recipe import Command, Recipe, apportion
+from sc2data.ground.vocab import SPLITS
 
 PAIR_SCHEMA = pa.schema([
     ("split", pa.string()), ("episode", pa.int64()), ("step", pa.int32()),

@@ -29,8 +29,8 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from sc2data.data.dataset import Dataset
-from sc2data.errors import Sc2DataError, reason
-from sc2data.files import (
+from sc2data.ground.errors import Sc2DataError, reason
+from sc2data.ground.files import (
     PARTIAL,
     FolderLock,
     check_out,
@@ -40,8 +40,13 @@ from sc2data.files import (
     sha256_files,
     write_atomic,
 )
-from sc2data.formats import PAIRSET, loads
+from sc2data.ground.formats import PAIRSET, loads
+from sc2data.ground.progress import Bar
+from sc2data.ground.provenance import versions
+from sc2data.ground.recipe import Recipe, RolloutSpec
 from sc2data.ground.resume import differences
+from sc2data.ground.schema import StackBatch
+from sc2data.ground.vocab import SPLITS
 from sc2data.labels.apply import labels_fingerprint
 from sc2data.pairs.draw import Labelled, NotEnoughStates, SourceShortage, build_pairs
 from sc2data.pairs.layout import (
@@ -53,11 +58,6 @@ from sc2data.pairs.layout import (
     packed_path,
 )
 from sc2data.pairs.packed import PackedWriter
-from sc2data.progress import Bar
-from sc2data.provenance import versions
-from sc2data.recipe import Recipe, RolloutSpec
-from sc2data.schema import StackBatch
-from sc2data.vocab import SPLITS
 
 READ_BATCH = 1024
 """Stacks read from the rollout shards per call while packing."""
@@ -431,7 +431,7 @@ def _make(recipe: Recipe, data: Path, out: Path, labelled: list[Labelled],
           sources: list[dict[str, Any]], drawn: pa.Table | None) -> PairsetSummary:
     """``make_pairset`` under its lock."""
     from sc2data.data.dataset import open_dataset
-    from sc2data.progress import bar as progress_bar
+    from sc2data.ground.progress import bar as progress_bar
 
     identity = _identity(recipe, labels_meta, sources or None)
     done = _existing(out, identity)

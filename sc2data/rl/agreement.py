@@ -37,8 +37,8 @@ from typing import Any
 
 import numpy as np
 
-from sc2data.errors import Sc2DataError
-from sc2data.files import write_atomic
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import write_atomic
 from sc2data.rl.runs import MODEL
 
 AGREEMENT_SEED = 2_000_000
@@ -125,11 +125,11 @@ def agreement(run: Path, mem: Path, *, episodes: int = 3, deterministic: bool = 
     import torch
     from sb3_contrib import MaskablePPO
 
+    from sc2data.ground.vocab import STEP_MUL
     from sc2data.labels.registry import call, load_registry
     from sc2data.model.reward import load_model
     from sc2data.rl.envs import BuildMarinesGym
     from sc2data.rulebase import schema_for, stack
-    from sc2data.vocab import STEP_MUL
 
     torch.set_num_threads(1)
     scorer = load_model(mem)

@@ -32,8 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from sc2data.errors import MissingDependencyError, Sc2DataError
-from sc2data.files import write_atomic
+from sc2data.ground.errors import MissingDependencyError, Sc2DataError
+from sc2data.ground.files import write_atomic
 
 MODES: tuple[str, ...] = ("sampled", "argmax")
 CONFIDENCE = 0.95

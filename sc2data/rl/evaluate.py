@@ -31,9 +31,9 @@ from typing import Any
 
 import numpy as np
 
-from sc2data.errors import Sc2DataError
-from sc2data.files import write_atomic
-from sc2data.formats import Shape
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import write_atomic
+from sc2data.ground.formats import Shape
 from sc2data.rl.runs import CONFIG, EVAL, MODEL, STATE
 from sc2data.rl.train import (
     EVAL_SEED,
@@ -74,7 +74,7 @@ REFERENCE_AGENTS: dict[str, str] = {
 def side_of(observation: Any) -> str:
     """``west`` or ``east``: where the SCVs stand relative to the command centre in a pysc2
     observation (screen x grows eastward)."""
-    from sc2data._pysc2 import features, units
+    from sc2data.ground._pysc2 import features, units
 
     unit_type = np.asarray(observation["feature_screen"][features.SCREEN_FEATURES.unit_type.index])
     scv = np.flatnonzero((unit_type == int(units.Terran.SCV)).any(axis=0))
@@ -198,7 +198,7 @@ def evaluate(run: Path, episodes: int = 10, progress: bool | None = None) -> dic
     import torch
     from sb3_contrib import MaskablePPO
 
-    from sc2data.progress import bar
+    from sc2data.ground.progress import bar
     from sc2data.rl.envs import BuildMarinesGym
 
     seeds, sides = eval_seeds(episodes)
@@ -223,7 +223,7 @@ def evaluate(run: Path, episodes: int = 10, progress: bool | None = None) -> dic
 def read_eval(run: Path) -> dict[str, Any]:
     """``RUN/eval.json`` of this protocol, checked; a one-line error naming the command that
     writes it when it is missing, older, or stale (the model trained on since)."""
-    from sc2data.formats import check_record, loads
+    from sc2data.ground.formats import check_record, loads
 
     path = run / EVAL
     redo = f"run sc2data rl evaluate {run}"
@@ -265,7 +265,7 @@ def _agent_episodes(name: str, seeds: Sequence[int], episode_steps: int | None,
     from sc2data.game.agents import make_agent
     from sc2data.game.agents import play as play_agent
     from sc2data.game.env import make_env
-    from sc2data.vocab import STEP_MUL
+    from sc2data.ground.vocab import STEP_MUL
 
     kwargs = {"game_loops": episode_steps * STEP_MUL} if episode_steps else {}
     marines = []
@@ -297,9 +297,9 @@ def baselines(out: Path, episodes: int = 10, episode_steps: int | None = None,
     if out.exists() and not out.is_dir():
         raise Sc2DataError(f"{out} is a file; --out takes a folder")
     seeds, sides = eval_seeds(episodes)
-    from sc2data.progress import bar
+    from sc2data.ground.progress import bar
+    from sc2data.ground.vocab import STEP_MUL
     from sc2data.rl.envs import BuildMarinesGym
-    from sc2data.vocab import STEP_MUL
 
     record: dict[str, Any] = {"episodes": episodes, "seeds": seeds, "sides": sides,
                               "episode_steps": episode_steps, "backend": "sim",
@@ -327,7 +327,7 @@ def baselines(out: Path, episodes: int = 10, episode_steps: int | None = None,
 
 def read_baselines(path: Path) -> dict[str, Any]:
     """A ``baselines.json`` (or the folder holding one), checked; one-line errors."""
-    from sc2data.formats import check_record, loads
+    from sc2data.ground.formats import check_record, loads
 
     file = path / "baselines.json" if path.is_dir() else path
     redo = f"write one with sc2data rl baselines --out {path}"

@@ -17,8 +17,8 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-from sc2data.errors import Sc2DataError
-from sc2data.files import PARTIAL, publish, sha256_file, write_atomic
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import PARTIAL, publish, sha256_file, write_atomic
 from sc2data.rl.runs import CONFIG, CURVE_CSV, CURVE_JSON, MODEL, STATE
 
 COPIED = (MODEL, STATE, CURVE_CSV, CURVE_JSON)

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from sc2data.errors import Sc2DataError
+from sc2data.ground.errors import Sc2DataError
 
 DEFAULT_NARRATION = Path(__file__).with_name("narrations") / "buildmarines.toml"
 """The BuildMarines narration shipped with sc2data."""

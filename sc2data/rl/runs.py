@@ -30,10 +30,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from sc2data.errors import Sc2DataError
-from sc2data.files import sha256_file, write_atomic
-from sc2data.formats import Shape, loads
 from sc2data.ground import resume
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import sha256_file, write_atomic
+from sc2data.ground.formats import Shape, loads
 from sc2data.ground.resume import CONFIG, EVAL, STATE
 
 __all__ = ["CONFIG", "EVAL", "STATE", "sha256_file"]

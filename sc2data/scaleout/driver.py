@@ -36,9 +36,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from sc2data.errors import MissingDependencyError, Sc2DataError
-from sc2data.files import one_line
-from sc2data.progress import Bar
+from sc2data.ground.errors import MissingDependencyError, Sc2DataError
+from sc2data.ground.files import one_line
+from sc2data.ground.progress import Bar
 from sc2data.scaleout.tasks import Tracker, label_task, rollout_task
 
 if TYPE_CHECKING:  # types only: the stages import this module, not the other way round
@@ -82,7 +82,7 @@ def is_address(text: str) -> bool:
 
 def transient_errors() -> tuple[type[BaseException], ...]:
     """Exceptions that mean the game instance crashed or lost its connection: worth a retry."""
-    from sc2data import _pysc2  # noqa: F401 - fixes protobuf before pysc2.lib loads
+    from sc2data.ground import _pysc2  # noqa: F401 - fixes protobuf before pysc2.lib loads
     from pysc2.lib import protocol, remote_controller, sc_process  # isort: skip
 
     return (protocol.ConnectionError, remote_controller.ConnectError, sc_process.SC2LaunchError,
@@ -363,8 +363,8 @@ class RayShards:
                  env_factory: EnvFactory, agent_factory: AgentFactory, bar: Bar
                  ) -> dict[int, list[dict[str, Any]]]:
         from sc2data.data.dataset import shard_name
-        from sc2data.files import PARTIAL
-        from sc2data.provenance import versions
+        from sc2data.ground.files import PARTIAL
+        from sc2data.ground.provenance import versions
 
         if not todo:
             return {}

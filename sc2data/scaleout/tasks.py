@@ -20,8 +20,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from sc2data.errors import Sc2DataError
-from sc2data.files import one_line
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import one_line
 
 _REPORT_EVERY_S = 0.5
 
@@ -72,7 +72,7 @@ def _attempt(tracker: Any, key: str, work: Callable[[Reporter], None],
 
 
 def _check_node(expected: dict[str, str]) -> None:
-    from sc2data.provenance import versions
+    from sc2data.ground.provenance import versions
 
     here = versions()
     if here != expected:
@@ -88,8 +88,8 @@ def rollout_task(config: Any, out: str, i: int, env_factory: Any, agent_factory:
     returns its index rows (``write_shard``'s result) and the task's peak memory."""
     from sc2data.data.dataset import shard_name
     from sc2data.data.rollout import write_shard
-    from sc2data.files import PARTIAL, fsync_path
     from sc2data.game import env as envs
+    from sc2data.ground.files import PARTIAL, fsync_path
 
     def work(report: Reporter) -> None:
         _check_node(expected)

@@ -9,8 +9,8 @@ from typing import Any
 import numpy as np
 import pytest
 
+from sc2data.ground.recipe import parse
 from sc2data.pairs.draw import MARGIN, Labelled, NotEnoughStates, apportion, build_pairs
-from sc2data.recipe import parse
 from tests.test_recipe import BASE
 
 RATES = np.array([0.05, 0.03])  # fire rates of build_scv, train_marine

@@ -16,9 +16,9 @@ import pyarrow.parquet as pq
 import pytest
 
 from sc2data.data.dataset import open_dataset
-from sc2data.errors import Sc2DataError
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.vocab import SPLITS
 from sc2data.pairs.packed import PackedSplit
-from sc2data.vocab import SPLITS
 from tests.cli import assert_one_line_error, exit_code, run_cli
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -205,8 +205,8 @@ def test_pair_names_a_command_the_labels_lack(built: Path, tmp_path: Path) -> No
 
 def test_recipe_text_must_be_the_rules_command(tmp_path: Path) -> None:
     """labels.parquet records the rule's command, pairs.parquet the recipe's text: they agree."""
+    from sc2data.ground.recipe import parse
     from sc2data.pairs.pairset import check_texts
-    from sc2data.recipe import parse
 
     recipe = parse(tomllib.loads(RECIPE.replace('text = "train a marine"',
                                                 'text = "train a trooper"')), "t.toml")

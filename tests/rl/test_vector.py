@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from sc2data.errors import Sc2DataError
+from sc2data.ground.errors import Sc2DataError
 from sc2data.rl import arena
 from sc2data.rl.batched import make_shaping
 from sc2data.rl.envs import PAPER_FUNCTIONS

@@ -24,8 +24,8 @@ import sc2data
 from sc2data.data.audit import verify
 from sc2data.data.dataset import INDEX
 from sc2data.data.rollout import RolloutConfig, _make_agent, episode_seeds, rollout
-from sc2data.errors import Sc2DataError
-from sc2data.files import sha256_file
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import sha256_file
 from sc2data.labels.label import label_dataset
 from sc2data.labels.store import LABELS_FILE, STACKS_FILE, SUMS_FILE
 from sc2data.scaleout.driver import RayOptions, label_on_ray, rollout_on_ray

@@ -19,9 +19,9 @@ from typing import Any, Literal
 
 import numpy as np
 
-from sc2data._pysc2 import features
-from sc2data.formats import shape_fault
-from sc2data.vocab import MINIMAP_SIZE, SCREEN_SIZE
+from sc2data.ground._pysc2 import features
+from sc2data.ground.formats import shape_fault
+from sc2data.ground.vocab import MINIMAP_SIZE, SCREEN_SIZE
 
 SCHEMA_VERSION = 1
 """Bump when the stored layout changes; readers refuse shards of another version."""

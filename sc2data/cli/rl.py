@@ -13,7 +13,7 @@ from typing import Optional
 
 import typer
 
-from sc2data.cliopts import config_options, with_options
+from sc2data.cli.cliopts import config_options, with_options
 from sc2data.rl.train import RLConfig  # numpy only: the heavy packages load inside train()
 
 app = typer.Typer(help="Reinforcement learning on BuildMarines: sparse, rule-shaped or "

@@ -17,10 +17,10 @@ import click
 import typer
 from typer.core import TyperGroup
 
-from sc2data.cliopts import OptionGroup, config_options, option, plural, with_options
-from sc2data.errors import Sc2DataError
+from sc2data.cli.cliopts import OptionGroup, config_options, option, plural, with_options
+from sc2data.cli.rl import app as rl_app
+from sc2data.ground.errors import Sc2DataError
 from sc2data.model.train import TrainConfig
-from sc2data.rl.cli import app as rl_app
 
 PIPELINE = ("rollout", "label", "pair", "build", "train", "evaluate", "tsne", "rl", "export",
             "info", "verify", "render", "rules", "version")
@@ -55,7 +55,7 @@ def version_lines() -> list[str]:
     from importlib.metadata import PackageNotFoundError
     from importlib.metadata import version as package_version
 
-    from sc2data.provenance import versions
+    from sc2data.ground.provenance import versions
 
     found = dict(versions())
     for dist in _MORE_VERSIONS:
@@ -250,7 +250,7 @@ def render(
         if out is None:
             raise Sc2DataError("a live render needs --out PNG")
         from sc2data.game.render import render_episode
-        from sc2data.recipe import RolloutSpec
+        from sc2data.ground.recipe import RolloutSpec
 
         live["agent"] = agent or RolloutSpec.agent  # one default agent: rollout's
         paths = [render_episode(out, **{k: v for k, v in live.items() if v is not None})]
@@ -308,7 +308,7 @@ def rollout(
     from dataclasses import replace
 
     from sc2data.data.rollout import RolloutConfig, folder_config
-    from sc2data.errors import Sc2DataError
+    from sc2data.ground.errors import Sc2DataError
     from sc2data.scaleout.where import run_rollout
 
     given = {k: v for k, v in {"env": env, "agent": agent, "episodes": episodes, "seed": seed,
@@ -316,7 +316,7 @@ def rollout(
     extra = {k: v for k, v in {"episodes_per_shard": episodes_per_shard,
                                "max_steps": max_steps}.items() if v is not None}
     if recipe is not None:
-        from sc2data.recipe import load
+        from sc2data.ground.recipe import load
 
         if given:
             raise Sc2DataError(f"--{next(iter(given))} conflicts with --recipe; change the "
@@ -348,8 +348,8 @@ def pair(
 ) -> None:
     """Draw the recipe's matched, mismatched and null pairs; pack the stacks of each split."""
     from sc2data.folders import expect_dataset
+    from sc2data.ground.recipe import load
     from sc2data.pairs.pairset import make_pairset
-    from sc2data.recipe import load
 
     r = load(recipe)
     # A recipe of several sources reads each from a folder inside --data.
@@ -378,7 +378,7 @@ def build(
     """Run a recipe end to end: rollout → label → pair, resuming whatever is already done."""
     from sc2data.build import PAIRS_DIR
     from sc2data.build import build as run
-    from sc2data.recipe import load
+    from sc2data.ground.recipe import load
 
     r = load(recipe)
     options = ray.options(workers) if ray else None

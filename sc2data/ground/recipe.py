@@ -54,8 +54,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from sc2data.errors import Sc2DataError
-from sc2data.vocab import (
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.vocab import (
     BACKENDS,
     LAYER_SETS,
     MISMATCH_METHODS,

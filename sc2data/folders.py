@@ -35,7 +35,7 @@ from sc2data.ground.files import writer
 from sc2data.ground.formats import Shape, loads
 from sc2data.ground.resume import CONFIG, EVAL, STATE, read_record, read_records
 from sc2data.model.runs import METRICS
-from sc2data.rl.runs import CURVE_CSV, MODEL
+from sc2data.rl.runs import CURVE_CSV, MODEL, read_state
 
 DATASET, PAIRSET, RUN, RL_RUN, BUILD = "dataset", "pair set", "training run", "RL run", "build"
 """What :func:`kind` answers."""
@@ -410,7 +410,6 @@ def _rl(folder: Path) -> tuple[list[str], list[str]]:
         except (OSError, zipfile.BadZipFile, EOFError) as e:
             faults.append(f"{model} is not a readable checkpoint ({type(e).__name__}: {e}); "
                           f"delete {folder} and train it again")
-    from sc2data.rl.runs import read_state
 
     try:  # the model and curve against the sha256 the last checkpoint recorded
         read_state(folder)

@@ -13,6 +13,8 @@ from typing import TYPE_CHECKING, Optional
 if TYPE_CHECKING:
     from sc2data.scaleout.driver import RayOptions
 
+from dataclasses import replace
+
 import click
 import typer
 from typer.core import TyperGroup
@@ -20,7 +22,7 @@ from typer.core import TyperGroup
 from sc2data.cli.cliopts import OptionGroup, config_options, option, plural, with_options
 from sc2data.cli.rl import app as rl_app
 from sc2data.ground.errors import Sc2DataError
-from sc2data.model.train import TrainConfig
+from sc2data.model.train import TrainConfig, train
 
 PIPELINE = ("rollout", "label", "pair", "build", "train", "evaluate", "tsne", "rl", "export",
             "info", "verify", "render", "rules", "version")
@@ -305,10 +307,7 @@ def rollout(
 
     Into a dataset folder, the settings not given are the folder's: `--out DATA --episodes N`
     grows DATA to N episodes (or finishes an interrupted run)."""
-    from dataclasses import replace
-
     from sc2data.data.rollout import RolloutConfig, folder_config
-    from sc2data.ground.errors import Sc2DataError
     from sc2data.scaleout.where import run_rollout
 
     given = {k: v for k, v in {"env": env, "agent": agent, "episodes": episodes, "seed": seed,
@@ -426,8 +425,6 @@ def verify(folder: Path = typer.Argument(..., metavar="FOLDER", help=_FOLDER_HEL
     flags={"progress": "--progress/--no-progress"}, metavars={"out": "PATH", "vectors": "PATH"}))
 def train_cmd(config: Optional[TrainConfig] = None) -> None:
     """Train the mutual-embedding model; keep the checkpoint of minimum validation loss."""
-    from sc2data.model.train import train
-
     assert config is not None
     typer.echo(f"run: {train(config)}")
 

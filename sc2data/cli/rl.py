@@ -14,7 +14,9 @@ from typing import Optional
 import typer
 
 from sc2data.cli.cliopts import config_options, with_options
-from sc2data.rl.train import RLConfig  # numpy only: the heavy packages load inside train()
+
+# sc2data.rl.train imports numpy only: the heavy packages load inside train() and require_rl().
+from sc2data.rl.train import RLConfig, require_rl, summary_line, train
 
 app = typer.Typer(help="Reinforcement learning on BuildMarines: sparse, rule-shaped or "
                        "narration-shaped rewards (MaskablePPO).",
@@ -28,8 +30,6 @@ app = typer.Typer(help="Reinforcement learning on BuildMarines: sparse, rule-sha
            "tensorboard": "--tensorboard", "progress": "--progress/--no-progress"}))
 def train_cmd(config: Optional[RLConfig] = None) -> None:
     """Train a MaskablePPO agent; writes checkpoints and the learning curve (curve.csv/json)."""
-    from sc2data.rl.train import require_rl, summary_line, train
-
     assert config is not None
     require_rl("sc2data rl train")
     start = time.perf_counter()
@@ -48,7 +48,6 @@ def evaluate_cmd(
     """Marines per episode (the game's score), actions sampled and argmax on the same seeded
     episodes; writes RUN/eval.json."""
     from sc2data.rl.evaluate import evaluate, summary
-    from sc2data.rl.train import require_rl
 
     require_rl("sc2data rl evaluate")
     typer.echo(summary(evaluate(run, episodes, progress)))
@@ -68,7 +67,6 @@ def baselines_cmd(
     """Reference agents on the evaluation episodes: the masked uniform policy of each action
     space, the reduced-random and the scripted agents; writes OUT/baselines.json."""
     from sc2data.rl.evaluate import baselines, reference_summary
-    from sc2data.rl.train import require_rl
 
     require_rl("sc2data rl baselines")
     for line in reference_summary(baselines(out, episodes, episode_steps, progress=progress)):
@@ -134,7 +132,6 @@ def agreement_cmd(
     with the labelling rule (precision, recall and F1, the rule as ground truth); and the
     narration and rules rewards' Pearson correlation and EPIC distance."""
     from sc2data.rl.agreement import agreement, summary
-    from sc2data.rl.train import require_rl
 
     require_rl("sc2data rl agreement")
     for line in summary(agreement(run, mem, episodes=episodes, deterministic=deterministic,
@@ -153,7 +150,6 @@ def fork_cmd(
     then `sc2data rl train --out OUT --mem MEM` with the run's other options and a larger
     --steps resumes it."""
     from sc2data.rl.fork import fork
-    from sc2data.rl.train import require_rl
 
     require_rl("sc2data rl fork")
     fork(run, out, mem)

@@ -25,6 +25,8 @@ import pyarrow.parquet as pq
 from sc2data.ground.errors import Sc2DataError, reason
 from sc2data.ground.files import FolderLock, write_atomic
 from sc2data.ground.progress import Bar
+from sc2data.ground.progress import bar as progress_bar
+from sc2data.ground.provenance import versions
 from sc2data.ground.resume import differences
 from sc2data.labels.apply import (
     check_requirements,
@@ -38,7 +40,7 @@ from sc2data.labels.apply import (
     required_keys,
     write_part,
 )
-from sc2data.labels.registry import Registered
+from sc2data.labels.registry import Registered, load_registry
 from sc2data.labels.source import Source, Unit, dataset_source
 from sc2data.labels.store import (
     FORMAT_VERSION,
@@ -57,7 +59,6 @@ DEFAULT_BATCH = 256
 UnitRunner = Callable[[Sequence[tuple[Unit, Path]], Sequence[str], int, Bar], None]
 """Labels units elsewhere than in this process (Ray tasks: ``sc2data.scaleout.driver.RayUnits``):
 ``runner([(unit, part path), …], keys, batch_size, bar)``, each through :func:`write_part`."""
-
 
 @dataclass(frozen=True)
 class LabelSummary:
@@ -128,8 +129,6 @@ def label(source: Source, rules: Sequence[Registered], out_dir: Path | str, *,
 
 def _run(source: Source, rules: Sequence[Registered], out: Path, fp: str, batch_size: int,
          progress: bool | None, run_units: UnitRunner | None = None) -> LabelSummary:
-    from sc2data.ground.progress import bar as progress_bar
-    from sc2data.ground.provenance import versions
 
     keys = required_keys(rules, source.schema)
     parts = out / PARTS_DIR
@@ -232,8 +231,6 @@ def label_dataset(data: Path | str, *, include: Sequence[str] | None = None,
                   overwrite: bool = False) -> LabelSummary:
     """``sc2data label``: load and select rules, open the dataset, label it into its folder,
     in ``workers`` processes (one shard at a time each) or through ``run_units``."""
-    from sc2data.labels.registry import load_registry
-
     if workers < 1:
         raise Sc2DataError(f"workers must be at least 1, not {workers}")
     rules = load_registry(rules_dir).select(include, exclude)

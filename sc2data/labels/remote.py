@@ -13,21 +13,19 @@ from pathlib import Path
 from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.files import PARTIAL
 from sc2data.ground.progress import Bar
+from sc2data.ground.workers import run_parallel
 from sc2data.labels.apply import fingerprint, parts_run, write_part
-from sc2data.labels.registry import Registered
+from sc2data.labels.registry import Registered, load_registry
 from sc2data.labels.source import Source, Unit, dataset_source
 
 Selection = tuple[tuple[str, ...] | None, tuple[str, ...], str | None]
 """``(include, exclude, rules_dir)``: how a process re-selects the run's rules."""
-
 
 @functools.lru_cache(maxsize=4)
 def _rules_and_source(data: str, selection: Selection, run: str
                       ) -> tuple[Sequence[Registered], Source]:
     """Loaded once per worker process and run (``run``: the run's fingerprint, so a process
     that outlives a run, as Ray's do, reloads for the next)."""
-    from sc2data.labels.registry import load_registry
-
     include, exclude, rules_dir = selection
     return load_registry(rules_dir).select(include, exclude), dataset_source(data)
 
@@ -66,7 +64,6 @@ class LocalUnits:
 
     def __call__(self, todo: Sequence[tuple[Unit, Path]], keys: Sequence[str], batch_size: int,
                  bar: Bar) -> None:
-        from sc2data.ground.workers import run_parallel
 
         if not todo:
             return

@@ -28,7 +28,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from sc2data.data.dataset import Dataset
+from sc2data.data.dataset import Dataset, open_dataset, read_index, read_manifest
 from sc2data.ground.errors import Sc2DataError, reason
 from sc2data.ground.files import (
     PARTIAL,
@@ -42,6 +42,7 @@ from sc2data.ground.files import (
 )
 from sc2data.ground.formats import PAIRSET, loads
 from sc2data.ground.progress import Bar
+from sc2data.ground.progress import bar as progress_bar
 from sc2data.ground.provenance import versions
 from sc2data.ground.recipe import Recipe, RolloutSpec
 from sc2data.ground.resume import differences
@@ -328,8 +329,6 @@ def _read(datasets: Sequence[Dataset], k: np.ndarray) -> StackBatch:
 
 def _check_shards(folder: Path) -> None:
     """One line unless every shard the index lists is the bytes it recorded."""
-    from sc2data.data.dataset import read_index
-
     index = read_index(folder).to_pydict()
     for name, sha in sorted(set(zip(index["shard"], index["shard_sha256"]))):
         path = folder / name
@@ -342,8 +341,6 @@ def _check_sources(recipe: Recipe, data: Path) -> tuple[list[Labelled], list[dic
     """Each of a recipe's sources (``DATA/NAME``) as labelled stacks, with its labels' record;
     a one-line error naming the first that is missing, damaged, rolled out otherwise than its
     source says, labelled by other rules' code, or of another schema than the first."""
-    from sc2data.data.dataset import read_manifest
-
     labelled, metas = [], []
     first: tuple[str, dict[str, Any], dict[str, Any]] | None = None
     for source in recipe.sources:
@@ -380,8 +377,6 @@ def _check_sources(recipe: Recipe, data: Path) -> tuple[list[Labelled], list[dic
 def make_pairset(recipe: Recipe, data: str | os.PathLike[str], out: str | os.PathLike[str], *,
                  progress: bool | None = None) -> PairsetSummary:
     """Build the recipe's pair set from the labelled dataset ``data`` into the folder ``out``."""
-    from sc2data.data.dataset import read_manifest
-
     started = time.perf_counter()
     data, out = Path(data), Path(out)
     check_out(out)
@@ -430,8 +425,6 @@ def _make(recipe: Recipe, data: Path, out: Path, labelled: list[Labelled],
           labels_meta: dict[str, Any], started: float, progress: bool | None,
           sources: list[dict[str, Any]], drawn: pa.Table | None) -> PairsetSummary:
     """``make_pairset`` under its lock."""
-    from sc2data.data.dataset import open_dataset
-    from sc2data.ground.progress import bar as progress_bar
 
     identity = _identity(recipe, labels_meta, sources or None)
     done = _existing(out, identity)

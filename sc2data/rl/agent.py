@@ -34,13 +34,13 @@ from sc2data.game.screen import ScreenView
 from sc2data.ground._pysc2 import actions, base_agent
 from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.files import sha256_file
+from sc2data.ground.vocab import SCREEN_SIZE
 from sc2data.rl.runs import MODEL
 
 CHECKPOINT = MODEL
 _LOADED: dict[tuple[str, str], tuple[Any, Any]] = {}
 """(run, sha256) → (model, RLConfig), one load per process (a factory makes an agent per
 episode)."""
-
 
 def _load(run: str, sha256: str) -> tuple[Any, Any]:
     """The run's policy and settings, once per process; the checkpoint must be ``sha256``."""
@@ -136,7 +136,6 @@ class PolicyAgent(base_agent.BaseAgent):
     def _paper_mask(view: ScreenView) -> np.ndarray:
         """The paper space's mask, as the env's ``action_masks``: available functions, then
         every x and every y."""
-        from sc2data.ground.vocab import SCREEN_SIZE
         from sc2data.rl.envs import PAPER_FUNCTIONS
 
         available = view.available

@@ -39,6 +39,7 @@ import numpy as np
 
 from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.files import write_atomic
+from sc2data.ground.vocab import STEP_MUL
 from sc2data.rl.runs import MODEL
 
 AGREEMENT_SEED = 2_000_000
@@ -53,7 +54,6 @@ BATCH = 512
 PairReward = Callable[[np.ndarray, np.ndarray], np.ndarray]
 """``reward(i, j)``: the reward of the transitions from state ``i[k]`` to state ``j[k]`` (state
 indices), shape ``(P,)`` or ``(P, K)`` for K rewards at once."""
-
 
 def canonical(reward: PairReward, s: np.ndarray, s2: np.ndarray, support: np.ndarray,
               gamma: float) -> np.ndarray:
@@ -125,7 +125,6 @@ def agreement(run: Path, mem: Path, *, episodes: int = 3, deterministic: bool = 
     import torch
     from sb3_contrib import MaskablePPO
 
-    from sc2data.ground.vocab import STEP_MUL
     from sc2data.labels.registry import call, load_registry
     from sc2data.model.reward import load_model
     from sc2data.rl.envs import BuildMarinesGym

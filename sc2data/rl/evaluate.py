@@ -33,7 +33,9 @@ import numpy as np
 
 from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.files import write_atomic
-from sc2data.ground.formats import Shape
+from sc2data.ground.formats import Shape, check_record, loads
+from sc2data.ground.progress import bar
+from sc2data.ground.vocab import STEP_MUL
 from sc2data.rl.runs import CONFIG, EVAL, MODEL, STATE
 from sc2data.rl.train import (
     EVAL_SEED,
@@ -67,7 +69,6 @@ REFERENCE_AGENTS: dict[str, str] = {
     "uniform-paper": "paper", "uniform-macro": "macro",
     "reduced-random": "macro", "scripted": "macro"}
 """Reference agents and the action space each plays in."""
-
 
 # -- the episodes -----------------------------------------------------------------------------
 
@@ -198,7 +199,6 @@ def evaluate(run: Path, episodes: int = 10, progress: bool | None = None) -> dic
     import torch
     from sb3_contrib import MaskablePPO
 
-    from sc2data.ground.progress import bar
     from sc2data.rl.envs import BuildMarinesGym
 
     seeds, sides = eval_seeds(episodes)
@@ -223,8 +223,6 @@ def evaluate(run: Path, episodes: int = 10, progress: bool | None = None) -> dic
 def read_eval(run: Path) -> dict[str, Any]:
     """``RUN/eval.json`` of this protocol, checked; a one-line error naming the command that
     writes it when it is missing, older, or stale (the model trained on since)."""
-    from sc2data.ground.formats import check_record, loads
-
     path = run / EVAL
     redo = f"run sc2data rl evaluate {run}"
     try:
@@ -265,7 +263,6 @@ def _agent_episodes(name: str, seeds: Sequence[int], episode_steps: int | None,
     from sc2data.game.agents import make_agent
     from sc2data.game.agents import play as play_agent
     from sc2data.game.env import make_env
-    from sc2data.ground.vocab import STEP_MUL
 
     kwargs = {"game_loops": episode_steps * STEP_MUL} if episode_steps else {}
     marines = []
@@ -297,8 +294,6 @@ def baselines(out: Path, episodes: int = 10, episode_steps: int | None = None,
     if out.exists() and not out.is_dir():
         raise Sc2DataError(f"{out} is a file; --out takes a folder")
     seeds, sides = eval_seeds(episodes)
-    from sc2data.ground.progress import bar
-    from sc2data.ground.vocab import STEP_MUL
     from sc2data.rl.envs import BuildMarinesGym
 
     record: dict[str, Any] = {"episodes": episodes, "seeds": seeds, "sides": sides,
@@ -327,8 +322,6 @@ def baselines(out: Path, episodes: int = 10, episode_steps: int | None = None,
 
 def read_baselines(path: Path) -> dict[str, Any]:
     """A ``baselines.json`` (or the folder holding one), checked; one-line errors."""
-    from sc2data.ground.formats import check_record, loads
-
     file = path / "baselines.json" if path.is_dir() else path
     redo = f"write one with sc2data rl baselines --out {path}"
     try:

@@ -34,13 +34,14 @@ import numpy as np
 from sc2data.ground.errors import MissingDependencyError, Sc2DataError
 from sc2data.ground.files import FolderLock, check_out, writing
 from sc2data.ground.formats import Shape
+from sc2data.ground.progress import bar
 from sc2data.ground.resume import differences, read_record, refusal
+from sc2data.ground.vocab import BACKENDS, LAYER_SETS, STEP_MUL
 from sc2data.rl import runs
 from sc2data.rl.runs import CURVE_FIELDS, STATE_SHAPE  # noqa: F401  (names users import)
 
 EVAL_SEED = 1_000_000
 """First evaluation episode seed (training's seeds stay below it)."""
-
 
 
 def require_rl(purpose: str) -> None:
@@ -182,10 +183,8 @@ CONFIG_SHAPE: Shape = {name: typing.get_args(hint) or hint for name, hint in
                       if name not in RLConfig.RESUMABLE and name != "LEGACY"}
 """``config.json``: :meth:`RLConfig.identity`, every field of its type."""
 
-
 def check_values(cfg: RLConfig) -> None:
     """One-line error unless every setting of ``cfg`` is one sc2data can run."""
-    from sc2data.ground.vocab import BACKENDS, LAYER_SETS
     from sc2data.rl.envs import ACTION_SPACES
     from sc2data.rl.obs import OBSERVATIONS
     from sc2data.rl.rewards import REWARDS
@@ -298,7 +297,6 @@ def make_env(cfg: RLConfig, scorer: Any = None, narration: Any = None) -> Any:
 
 def game_loops(cfg: RLConfig) -> int | None:
     """The episode length in game loops (None: the map's)."""
-    from sc2data.ground.vocab import STEP_MUL
 
     return cfg.episode_steps * STEP_MUL if cfg.episode_steps else None
 
@@ -447,7 +445,6 @@ def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.logger import configure
 
-    from sc2data.ground.progress import bar
 
     # The learner and the games' workers take turns (a vector step, then the batched reward and
     # policy; PPO's update while the workers wait), so the learner may use every core.

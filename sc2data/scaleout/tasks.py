@@ -21,7 +21,8 @@ from pathlib import Path
 from typing import Any
 
 from sc2data.ground.errors import Sc2DataError
-from sc2data.ground.files import one_line
+from sc2data.ground.files import PARTIAL, fsync_path, one_line
+from sc2data.ground.provenance import versions
 
 _REPORT_EVERY_S = 0.5
 
@@ -72,7 +73,6 @@ def _attempt(tracker: Any, key: str, work: Callable[[Reporter], None],
 
 
 def _check_node(expected: dict[str, str]) -> None:
-    from sc2data.ground.provenance import versions
 
     here = versions()
     if here != expected:
@@ -89,7 +89,6 @@ def rollout_task(config: Any, out: str, i: int, env_factory: Any, agent_factory:
     from sc2data.data.dataset import shard_name
     from sc2data.data.rollout import write_shard
     from sc2data.game import env as envs
-    from sc2data.ground.files import PARTIAL, fsync_path
 
     def work(report: Reporter) -> None:
         _check_node(expected)

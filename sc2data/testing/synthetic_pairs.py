@@ -21,6 +21,7 @@ import pyarrow.parquet as pq
 
 from sc2data.ground._pysc2 import features, units
 from sc2data.ground.formats import PAIRSET
+from sc2data.ground.recipe import Command
 from sc2data.ground.schema import Schema, StackBatch
 from sc2data.pairs.layout import fingerprint
 from sc2data.pairs.packed import PackedWriter
@@ -224,7 +225,6 @@ def write_pairset(out: str | Path, states_per_command: int = 40, null_states: in
                 n_pairs += 1
         counts[split] = {"pairs": n_pairs, "states": len(members)}
     if any(c.get("train_paraphrases") for c in commands):  # drawn as sc2data pair draws them
-        from sc2data.ground.recipe import Command
         from sc2data.pairs.draw import draw_texts
 
         cmds = [Command(str(c["id"]), str(c["text"]),

@@ -31,7 +31,7 @@ from sc2data.data.rollout import RolloutConfig, index_rows, manifest_for
 from sc2data.data.shards import ShardWriter
 from sc2data.game.agents import make_agent, play
 from sc2data.game.env import make_env
-from sc2data.ground.schema import Schema
+from sc2data.schema import Schema
 
 FILTERS: dict[str, dict[str, Any]] = {
     "gzip-1": {"compression": "gzip", "compression_opts": 1},

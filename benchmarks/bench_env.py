@@ -48,7 +48,7 @@ def _run(env: Any, agent: Any, steps: int) -> float:
 
 def _agent(workload: str, seed: int) -> Any:
     from sc2data.game.agents import (
-        make_agent,  # imports pysc2 through sc2data.ground._pysc2 first
+        make_agent,  # imports pysc2 through sc2data._pysc2 first
     )
     from pysc2.agents import base_agent  # isort: skip
 

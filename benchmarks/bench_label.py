@@ -25,9 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
-from sc2data.ground.schema import Schema, StackBatch
 from sc2data.labels.apply import label_batches
 from sc2data.labels.registry import load_registry
+from sc2data.schema import Schema, StackBatch
 
 
 def episode_stacks(agent_name: str, seed: int, keys: set[str]) -> dict[str, np.ndarray]:

@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from sc2data.ground._pysc2 import actions, features, units  # first: it makes pysc2 importable
+from sc2data._pysc2 import actions, features, units  # first: it makes pysc2 importable
 
 from pysc2.agents.base_agent import BaseAgent  # isort: skip
 from sc2data.game.agents import Macro, MacroAgent, ScriptedAgent, make_agent, play

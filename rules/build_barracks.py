@@ -12,9 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from sc2data.ground._pysc2 import units
-from sc2data.ground.schema import StackBatch
+from sc2data._pysc2 import units
 from sc2data.rulebase import Rule, appeared_pixels
+from sc2data.schema import StackBatch
 
 BARRACKS_TYPES: tuple[int, ...] = (int(units.Terran.Barracks),)
 MIN_NEW_PIXELS = 20

@@ -22,8 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from sc2data.ground.schema import StackBatch
 from sc2data.rulebase import Rule, change
+from sc2data.schema import StackBatch
 
 MARINE_MINERALS = 50
 """A marine's mineral cost (Legacy of the Void game data)."""

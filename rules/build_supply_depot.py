@@ -17,9 +17,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from sc2data.ground._pysc2 import units
-from sc2data.ground.schema import StackBatch
+from sc2data._pysc2 import units
 from sc2data.rulebase import Rule, appeared_pixels
+from sc2data.schema import StackBatch
 
 DEPOT_TYPES: tuple[int, ...] = (int(units.Terran.SupplyDepot), int(units.Terran.SupplyDepotLowered))
 MIN_NEW_PIXELS = 8

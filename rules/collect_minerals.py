@@ -21,8 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from sc2data.ground.schema import StackBatch
 from sc2data.rulebase import Rule, fell
+from sc2data.schema import StackBatch
 
 
 class CollectMinerals(Rule):

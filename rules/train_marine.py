@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from sc2data.ground.schema import StackBatch
 from sc2data.rulebase import Rule, rose
+from sc2data.schema import StackBatch
 
 
 class TrainMarine(Rule):

@@ -28,9 +28,9 @@ if TYPE_CHECKING:
     from sc2data.data.dataset import Dataset, open_dataset  # noqa: F401
     from sc2data.game.agents import make_agent  # noqa: F401
     from sc2data.game.env import make_env  # noqa: F401
-    from sc2data.ground.schema import Schema, StackBatch  # noqa: F401
     from sc2data.ground.stacker import Stacker  # noqa: F401
     from sc2data.model.reward import load_model  # noqa: F401
+    from sc2data.schema import Schema, StackBatch  # noqa: F401
 
 _WHERE = {
     "Dataset": "sc2data.data.dataset",
@@ -38,8 +38,8 @@ _WHERE = {
     "make_agent": "sc2data.game.agents",
     "make_env": "sc2data.game.env",
     "load_model": "sc2data.model.reward",
-    "Schema": "sc2data.ground.schema",
-    "StackBatch": "sc2data.ground.schema",
+    "Schema": "sc2data.schema",
+    "StackBatch": "sc2data.schema",
     "Stacker": "sc2data.ground.stacker",
 }
 """Each public name and the module it lives in."""

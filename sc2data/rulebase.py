@@ -9,7 +9,7 @@ A rule is a small pure object. It declares
   labeller reads only those from storage and refuses a dataset that lacks one;
 
 and answers ``rule(batch) -> np.ndarray`` of shape ``(B,)`` and dtype ``bool`` for a
-:class:`~sc2data.ground.schema.StackBatch` of B stacks. It reads the batch only by pysc2 names
+:class:`~sc2data.schema.StackBatch` of B stacks. It reads the batch only by pysc2 names
 (``batch.layer("screen/unit_type")``, ``batch.vector("player", "food_workers")``), so the same rule
 labels the embedded simulator's frames and the real game's observations (``Schema.extract``)
 unchanged. No I/O, no state: a test builds two frames by hand (:func:`blank_frame`,
@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from sc2data.ground.schema import VECTORS, Schema, StackBatch, layer
+from sc2data.schema import VECTORS, Schema, StackBatch, layer
 
 RULE_ID = re.compile(r"^[a-z][a-z0-9]*(?:_[a-z0-9]+)*$")
 """Rule ids are snake_case: lowercase words of letters and digits joined by single underscores."""

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sc2data.ground.schema import Schema
+from sc2data.schema import Schema
 
 SMALL_SCHEMA = Schema.from_names(["unit_type", "player_relative", "unit_hit_points"],
                                  ["player_relative", "camera"])

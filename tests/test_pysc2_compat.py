@@ -29,7 +29,7 @@ def test_pysc2_imports_after_import_sc2data() -> None:
 def test_the_palettes_are_those_sc2data_draws_with() -> None:
     """The hook leaves pysc2's colours as sc2data's own import of pysc2 makes them."""
     palette = "features.SCREEN_FEATURES.unit_type.palette[:400].sum()"
-    mine = run(f"from sc2data.ground._pysc2 import features; print({palette})")
+    mine = run(f"from sc2data._pysc2 import features; print({palette})")
     users = run(f"import sc2data; from pysc2.lib import features; print({palette})")
     assert mine.returncode == 0 and users.returncode == 0, mine.stderr + users.stderr
     assert mine.stdout == users.stdout

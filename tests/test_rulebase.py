@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sc2data.ground.schema import MissingLayerError, Schema, StackBatch
 from sc2data.rulebase import (
     RULE_ID,
     FunctionRule,
@@ -25,6 +24,7 @@ from sc2data.rulebase import (
     stack,
     synthetic_batch,
 )
+from sc2data.schema import MissingLayerError, Schema, StackBatch
 
 
 def test_rose_fell_change() -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 import sc2data
-from sc2data.ground.schema import Schema
+from sc2data.schema import Schema
 
 
 def test_stacks_pair_previous_and_current_as_the_rollout_does() -> None:

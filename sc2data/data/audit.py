@@ -16,6 +16,7 @@ from typing import Any
 import h5py
 import numpy as np
 
+from sc2data._pysc2 import actions
 from sc2data.data.dataset import (
     INDEX,
     MANIFEST,
@@ -25,10 +26,9 @@ from sc2data.data.dataset import (
     shard_settings,
 )
 from sc2data.data.shards import CHUNK_INDEX, EPISODE_COLUMNS, Shard, chunk_table
-from sc2data.ground._pysc2 import actions
 from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.files import PARTIAL, sha256_file
-from sc2data.ground.schema import Block
+from sc2data.schema import Block
 
 _BLOCK = 1024
 """Frames read per call while verifying."""

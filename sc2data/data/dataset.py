@@ -35,7 +35,7 @@ from sc2data.data.shards import Shard
 from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.files import write_atomic
 from sc2data.ground.formats import DATASET, loads
-from sc2data.ground.schema import Block, Index, Schema, SchemaError, StackBatch, positions
+from sc2data.schema import Block, Index, Schema, SchemaError, StackBatch, positions
 
 MANIFEST = "dataset.json"
 INDEX = "index.parquet"

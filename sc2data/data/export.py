@@ -50,8 +50,8 @@ from sc2data.ground.errors import MissingDependencyError, Sc2DataError, reason
 from sc2data.ground.files import PARTIAL, check_out, fsync_path, publish, writing
 from sc2data.ground.progress import bar
 from sc2data.ground.provenance import versions
-from sc2data.ground.schema import Schema
 from sc2data.ground.vocab import EPISODE_STEPS
+from sc2data.schema import Schema
 
 FORMATS = ("npz", "minari", "hf")
 """What ``--to`` takes."""
@@ -246,7 +246,7 @@ def spaces(schema: Schema) -> tuple[Any, Any]:
     the stored dtypes, and ``Dict(function=Discrete, args=Box)``."""
     from gymnasium import spaces as gs
 
-    from sc2data.ground._pysc2 import actions
+    from sc2data._pysc2 import actions
 
     flat: dict[str, Any] = {}
     for l in schema.layers:

@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from sc2data._pysc2 import base_agent, environment
 from sc2data.data.audit import check_shard
 from sc2data.data.chunks import Codec
 from sc2data.data.dataset import (
@@ -45,7 +46,6 @@ from sc2data.data.dataset import (
 )
 from sc2data.data.shards import Shard, ShardWriter
 from sc2data.game import env as envs
-from sc2data.ground._pysc2 import base_agent, environment
 from sc2data.ground.errors import Sc2DataError, reason
 from sc2data.ground.files import LOCK, PARTIAL, FolderLock, publish, sha256_file, writing
 from sc2data.ground.formats import DATASET
@@ -54,9 +54,9 @@ from sc2data.ground.progress import bar as progress_bar
 from sc2data.ground.provenance import versions
 from sc2data.ground.recipe import MAX_EPISODES, Recipe, RolloutSpec
 from sc2data.ground.resume import differences, refusal
-from sc2data.ground.schema import Schema
 from sc2data.ground.vocab import BACKENDS, EPISODE_STEPS, LAYER_SETS, MAP_NAME
 from sc2data.ground.workers import run_parallel
+from sc2data.schema import Schema
 
 EnvFactory = Callable[[int], environment.Base]
 """``seed -> environment.Base`` (a pysc2 environment) for one episode."""

@@ -1,6 +1,6 @@
 """One shard file: consecutive episodes of frames, actions and rewards, in HDF5.
 
-Layout, all derived from a :class:`~sc2data.ground.schema.Schema`::
+Layout, all derived from a :class:`~sc2data.schema.Schema`::
 
     /frames/<block>    (F, …)  one dataset per storage block (``Schema.blocks()``): the layers of
                                one group and dtype stacked, ``screen_uint8`` (F, L, 64, 64), …,
@@ -35,6 +35,7 @@ from typing import Any, NoReturn
 import h5py
 import numpy as np
 
+from sc2data._pysc2 import actions
 from sc2data.data.chunks import (
     ChecksumError,
     ChunkDecoder,
@@ -42,11 +43,10 @@ from sc2data.data.chunks import (
     Codec,
     fast_path_ok,
 )
-from sc2data.ground._pysc2 import actions
 from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.files import fsync_path
 from sc2data.ground.formats import SHARD, loads
-from sc2data.ground.schema import Schema, SchemaError
+from sc2data.schema import Schema, SchemaError
 
 """2: frames stored in blocks of keys (1 had one dataset per key)."""
 ARG_WIDTH = max(sum(len(a.sizes) for a in f.args) for f in actions.FUNCTIONS)
@@ -403,7 +403,7 @@ class Shard:
         return self._index
 
     def frames(self, block: str) -> FrameSource:
-        """The chunk reader of frame dataset ``block`` (a :class:`~sc2data.ground.schema.Block`
+        """The chunk reader of frame dataset ``block`` (a :class:`~sc2data.schema.Block`
         name)."""
         if block not in self._sources:
             if self._fd is None:

@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from sc2data.ground._pysc2 import (  # first: it makes pysc2 importable on 3.11
+from sc2data._pysc2 import (  # first: it makes pysc2 importable on 3.11
     actions,
     features,
     units,

@@ -6,8 +6,8 @@ import os
 from pathlib import Path
 from typing import Any, Literal
 
-from sc2data.ground import _pysc2
-from sc2data.ground._pysc2 import environment, interface_format
+from sc2data import _pysc2
+from sc2data._pysc2 import environment, interface_format
 from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.vocab import BACKENDS, MAP_NAME, STEP_MUL
 

@@ -18,9 +18,9 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from sc2data.ground._pysc2 import environment
+from sc2data._pysc2 import environment
 
-from pysc2.env import mock_sc2_env  # isort: skip  (after sc2data.ground._pysc2: pysc2 on 3.11)
+from pysc2.env import mock_sc2_env  # isort: skip  (after sc2data._pysc2: pysc2 on 3.11)
 
 EPISODE_STEPS = 10
 """Agent steps per mock episode (pysc2's ``SC2TestEnv`` default)."""

@@ -22,10 +22,10 @@ from typing import Any
 
 import numpy as np
 
-from sc2data.ground._pysc2 import buffs, features, units
+from sc2data._pysc2 import buffs, features, units
 from sc2data.ground.errors import Sc2DataError, reason
 from sc2data.ground.files import write_atomic
-from sc2data.ground.schema import StackBatch
+from sc2data.schema import StackBatch
 
 COLUMNS = 7
 """Tiles per band; screen layers fill the first bands, minimap layers start on a fresh band."""

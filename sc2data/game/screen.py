@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from sc2data.ground._pysc2 import actions, features, units
+from sc2data._pysc2 import actions, features, units
 
 CAMERA_WIDTH = 24.0
 """World units across the feature screen (pysc2's default ``camera_width_world_units``)."""

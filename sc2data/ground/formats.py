@@ -159,7 +159,7 @@ SHARD = Format("sc2data-shard", 3, "shard", "regenerate it with this sc2data", r
 leaves out the dataset's episode count, so a shard's bytes do not depend on how many episodes
 follow it and a dataset grows without rewriting its full shards."""
 DATASET = Format("sc2data-dataset", 3, "dataset", "regenerate it with this sc2data", reads=(2,),
-                 shape={"schema": dict,  # its own shape: sc2data.ground.schema
+                 shape={"schema": dict,  # its own shape: sc2data.schema
                         "settings": {"episodes?": (int, type(None))},  # the codec: data.dataset
                         "versions?": dict})
 """``dataset.json``; dataset format V holds shards of format V (2 and 3). A dataset of an

@@ -2,7 +2,7 @@
 
 A dataset stores stacks (previous frame, current frame); an agent playing live sees one
 observation per step. :class:`Stacker` keeps the previous frame and turns each new observation
-into a one-stack :class:`~sc2data.ground.schema.StackBatch`, exactly as the rollout writer pairs
+into a one-stack :class:`~sc2data.schema.StackBatch`, exactly as the rollout writer pairs
 frames::
 
     stacker = sc2data.Stacker(mem.schema)
@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from sc2data.ground.schema import Schema, StackBatch
+from sc2data.schema import Schema, StackBatch
 
 
 class Stacker:

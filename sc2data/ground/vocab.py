@@ -24,7 +24,7 @@ BACKENDS: tuple[str, ...] = ("sim", "sc2")
 """Environment backends: ``sim`` the embedded simulator (default), ``sc2`` the real game."""
 
 LAYER_SETS: tuple[str, ...] = ("paper", "full")
-"""Layer-set presets of :class:`sc2data.ground.schema.Schema`: the paper's 13 + 7 layers, or all
+"""Layer-set presets of :class:`sc2data.schema.Schema`: the paper's 13 + 7 layers, or all
 27 + 11."""
 
 SPLITS: tuple[str, ...] = ("train", "val", "test")

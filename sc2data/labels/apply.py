@@ -15,10 +15,10 @@ import pyarrow as pa
 
 from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.formats import loads
-from sc2data.ground.schema import Schema
 from sc2data.labels.registry import Registered, call, check_output
 from sc2data.labels.source import Batches, Unit
 from sc2data.labels.store import FORMAT_VERSION, write_sums, write_table
+from sc2data.schema import Schema
 
 
 def check_requirements(rules: Sequence[Registered], schema: Schema, where: str) -> None:

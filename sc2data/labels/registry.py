@@ -33,8 +33,8 @@ from typing import Any
 import numpy as np
 
 from sc2data.ground.errors import Sc2DataError
-from sc2data.ground.schema import MissingLayerError, StackBatch
 from sc2data.rulebase import RULE_ID, Rule, describe, is_schema_key, synthetic_batch
+from sc2data.schema import MissingLayerError, StackBatch
 
 GROUP = "sc2data.rules"
 """The entry-point group rules are registered under."""

@@ -16,7 +16,7 @@ import numpy as np
 
 from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.files import sha256_file
-from sc2data.ground.schema import Schema, StackBatch
+from sc2data.schema import Schema, StackBatch
 
 READ_STACKS = 4096
 """Stacks read from a dataset at once; ``--batch-size`` stacks at a time go through the rules."""

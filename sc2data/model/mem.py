@@ -8,7 +8,7 @@ paper's); or (``"minilm"``) the whole command's frozen sentence embedding
 (:mod:`sc2data.model.words`, :mod:`sc2data.model.sentences`) goes through a 2-layer MLP to 256. A
 state and a command match when the Euclidean distance of their embeddings is below 0.5.
 
-Input encoding, all derived from the :class:`~sc2data.ground.schema.Schema` the data carries:
+Input encoding, all derived from the :class:`~sc2data.schema.Schema` the data carries:
 
 - both frames of a stack are channels of one image (the paper's temporal stack of 2);
 - a scalar layer is divided by its pysc2 scale;
@@ -45,7 +45,7 @@ import numpy as np
 from sc2data.ground.errors import MissingDependencyError, Sc2DataError
 from sc2data.ground.files import write_atomic
 from sc2data.ground.formats import CHECKPOINT
-from sc2data.ground.schema import Schema, SchemaError, StackBatch
+from sc2data.schema import Schema, SchemaError, StackBatch
 
 try:
     import torch

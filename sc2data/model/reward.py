@@ -35,8 +35,8 @@ from typing import Any
 import numpy as np
 
 from sc2data.ground.errors import MissingDependencyError, Sc2DataError
-from sc2data.ground.schema import Schema, StackBatch
 from sc2data.model.runs import BEST, CHECKPOINTS, CONFIG, STATE
+from sc2data.schema import Schema, StackBatch
 
 
 class MEMScorer:

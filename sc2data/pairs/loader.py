@@ -22,9 +22,9 @@ import pyarrow.parquet as pq
 
 from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.formats import PAIRSET, loads
-from sc2data.ground.schema import Schema, SchemaError
 from sc2data.pairs.layout import META_FILE, PAIRS_FILE, check_content, packed_path
 from sc2data.pairs.packed import BLOCK, PackedSplit
+from sc2data.schema import Schema, SchemaError
 
 SPLITS = ("train", "val", "test")
 COLUMNS = ("split", "state", "episode", "step", "command_id", "command", "target", "kind", "label")

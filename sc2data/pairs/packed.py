@@ -23,7 +23,7 @@ import numpy as np
 from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.files import PARTIAL, publish
 from sc2data.ground.formats import PACKED
-from sc2data.ground.schema import Schema, SchemaError, StackBatch
+from sc2data.schema import Schema, SchemaError, StackBatch
 
 BLOCK = 256
 """Stacks per HDF5 chunk: the unit the trainer reads and shuffles."""

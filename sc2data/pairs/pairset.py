@@ -46,7 +46,6 @@ from sc2data.ground.progress import bar as progress_bar
 from sc2data.ground.provenance import versions
 from sc2data.ground.recipe import Recipe, RolloutSpec
 from sc2data.ground.resume import differences
-from sc2data.ground.schema import StackBatch
 from sc2data.ground.vocab import SPLITS
 from sc2data.labels.apply import labels_fingerprint
 from sc2data.pairs.draw import Labelled, NotEnoughStates, SourceShortage, build_pairs
@@ -59,6 +58,7 @@ from sc2data.pairs.layout import (
     packed_path,
 )
 from sc2data.pairs.packed import PackedWriter
+from sc2data.schema import StackBatch
 
 READ_BATCH = 1024
 """Stacks read from the rollout shards per call while packing."""

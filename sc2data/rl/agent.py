@@ -29,9 +29,9 @@ from typing import Any
 
 import numpy as np
 
+from sc2data._pysc2 import actions, base_agent
 from sc2data.game.agents import AgentSpec, ReducedRandomAgent, register_agent_kind
 from sc2data.game.screen import ScreenView
-from sc2data.ground._pysc2 import actions, base_agent
 from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.files import sha256_file
 from sc2data.ground.vocab import SCREEN_SIZE

@@ -18,9 +18,9 @@ from typing import Any
 import numpy as np
 
 from sc2data.ground.errors import Sc2DataError
-from sc2data.ground.schema import Schema, StackBatch
 from sc2data.rl.narration import Narration
 from sc2data.rulebase import schema_for
+from sc2data.schema import Schema, StackBatch
 
 
 def decision_stacks(frames: Mapping[str, np.ndarray], n_frames: np.ndarray, schema: Schema

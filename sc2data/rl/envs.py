@@ -61,10 +61,10 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from sc2data._pysc2 import actions, features, units
 from sc2data.game.agents import ReducedRandomAgent
 from sc2data.game.env import make_env
 from sc2data.game.screen import ScreenView
-from sc2data.ground._pysc2 import actions, features, units
 from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.vocab import SCREEN_SIZE, STEP_MUL
 from sc2data.rl.obs import ObsConfig, Observer

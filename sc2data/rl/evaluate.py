@@ -75,7 +75,7 @@ REFERENCE_AGENTS: dict[str, str] = {
 def side_of(observation: Any) -> str:
     """``west`` or ``east``: where the SCVs stand relative to the command centre in a pysc2
     observation (screen x grows eastward)."""
-    from sc2data.ground._pysc2 import features, units
+    from sc2data._pysc2 import features, units
 
     unit_type = np.asarray(observation["feature_screen"][features.SCREEN_FEATURES.unit_type.index])
     scv = np.flatnonzero((unit_type == int(units.Terran.SCV)).any(axis=0))

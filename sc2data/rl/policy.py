@@ -17,7 +17,7 @@ from gymnasium import spaces
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
-from sc2data.ground.schema import layer
+from sc2data.schema import layer
 
 
 def _cnn(channels: int) -> nn.Sequential:

@@ -29,11 +29,11 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from sc2data.ground._pysc2 import features
+from sc2data._pysc2 import features
 from sc2data.ground.errors import Sc2DataError
-from sc2data.ground.schema import Schema, StackBatch
 from sc2data.rl.narration import Narration, check_readable
 from sc2data.rulebase import Rule, schema_for, stack
+from sc2data.schema import Schema, StackBatch
 
 REWARDS: tuple[str, ...] = ("sparse", "rules", "narration", "zero")
 """``zero`` is a control: no reward at all, to see what PPO's updates do with no signal."""

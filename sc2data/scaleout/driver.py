@@ -83,7 +83,7 @@ def is_address(text: str) -> bool:
 
 def transient_errors() -> tuple[type[BaseException], ...]:
     """Exceptions that mean the game instance crashed or lost its connection: worth a retry."""
-    from sc2data.ground import _pysc2  # noqa: F401 - fixes protobuf before pysc2.lib loads
+    from sc2data import _pysc2  # noqa: F401 - fixes protobuf before pysc2.lib loads
     from pysc2.lib import protocol, remote_controller, sc_process  # isort: skip
 
     return (protocol.ConnectionError, remote_controller.ConnectError, sc_process.SC2LaunchError,

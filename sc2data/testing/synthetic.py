@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from sc2data.ground._pysc2 import environment, features, units
-from sc2data.ground.schema import MINIMAP_SIZE, SCREEN_SIZE, Schema
+from sc2data._pysc2 import environment, features, units
+from sc2data.schema import MINIMAP_SIZE, SCREEN_SIZE, Schema
 
 _K = SCREEN_SIZE / 24.0
 """Screen pixels per world unit (the screen spans 24 world units)."""

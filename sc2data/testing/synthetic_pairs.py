@@ -19,12 +19,12 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from sc2data.ground._pysc2 import features, units
+from sc2data._pysc2 import features, units
 from sc2data.ground.formats import PAIRSET
 from sc2data.ground.recipe import Command
-from sc2data.ground.schema import Schema, StackBatch
 from sc2data.pairs.layout import fingerprint
 from sc2data.pairs.packed import PackedWriter
+from sc2data.schema import Schema, StackBatch
 
 COMMANDS: tuple[dict[str, object], ...] = (
     {"id": "build_scv", "text": "build an scv",

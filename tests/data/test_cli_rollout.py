@@ -11,7 +11,7 @@ import h5py
 import pytest
 
 from sc2data.data.dataset import INDEX
-from sc2data.ground.schema import Schema
+from sc2data.schema import Schema
 from tests.cli import assert_one_line_error, run_cli
 from tests.data.test_storage import flip_byte_in_chunk
 from tests.synthetic_data import make_dataset

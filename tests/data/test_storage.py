@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import sc2data
+from sc2data._pysc2 import actions
 from sc2data.data.chunks import ChecksumError, Codec, fletcher32
 from sc2data.data.dataset import Dataset
 from sc2data.data.rollout import episode_seeds
@@ -24,9 +25,8 @@ from sc2data.data.shards import (
     flatten_args,
     function_call,
 )
-from sc2data.ground._pysc2 import actions
 from sc2data.ground.errors import Sc2DataError
-from sc2data.ground.schema import Schema, StackBatch
+from sc2data.schema import Schema, StackBatch
 from sc2data.testing.synthetic import synthetic_episode
 from tests.synthetic_data import STEPS, make_dataset
 

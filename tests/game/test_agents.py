@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from sc2data.ground._pysc2 import actions, environment, features, units  # first: pysc2 on 3.11
+from sc2data._pysc2 import actions, environment, features, units  # first: pysc2 on 3.11
 
 from pysc2.agents import base_agent, random_agent  # isort: skip
 from pysc2.env import mock_sc2_env  # isort: skip

@@ -68,8 +68,8 @@ def test_cli_unknown_backend_prints_one_line_and_exits_2(tmp_path: Path) -> None
 
 @pytest.mark.sc2
 def test_real_game_plays_a_few_steps_with_the_scripted_agent() -> None:
+    from sc2data._pysc2 import features
     from sc2data.game.agents import make_agent, play
-    from sc2data.ground._pysc2 import features
 
     env = make_env("sc2", seed=3)
     try:

@@ -56,7 +56,7 @@ def test_every_agent_plays_the_real_interface(mock_sc2: None, agent_name: str) -
 
 def test_the_mock_checks_actions_as_sc2env_does(mock_sc2: None) -> None:
     import sc2data
-    from sc2data.ground._pysc2 import actions
+    from sc2data._pysc2 import actions
 
     env = sc2data.make_env("sc2", seed=0)
     env.reset()

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from matplotlib import image
 
-from sc2data.ground._pysc2 import features, units  # first: it makes pysc2 importable on 3.11
+from sc2data._pysc2 import features, units  # first: it makes pysc2 importable on 3.11
 
 from pysc2.env import mock_sc2_env  # isort: skip
 from sc2data.cli import main

@@ -12,11 +12,10 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
+from sc2data._pysc2 import units
 from sc2data.ground import files
-from sc2data.ground._pysc2 import units
 from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.files import PARTIAL, FolderLock
-from sc2data.ground.schema import Schema, StackBatch
 from sc2data.labels.label import PARTS_DIR, label
 from sc2data.labels.registry import Registered, RuleError, load_registry, load_rules_dir
 from sc2data.labels.source import Source, Unit
@@ -28,6 +27,7 @@ from sc2data.rulebase import (
     set_field,
     stack,
 )
+from sc2data.schema import Schema, StackBatch
 from tests.cli import assert_one_line_error, exit_code, run_cli
 
 BUILTIN = load_registry()

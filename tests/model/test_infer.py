@@ -10,12 +10,12 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from sc2data import load_model  # noqa: E402
-from sc2data.ground._pysc2 import units  # noqa: E402
-from sc2data.ground.schema import Schema  # noqa: E402
+from sc2data._pysc2 import units  # noqa: E402
 from sc2data.model.infer import _WORDS_FROM, FastStateEncoder, _cell_totals  # noqa: E402
 from sc2data.model.mem import MEM, ModelConfig, conv_for, model_inputs, value_tables  # noqa: E402
 from sc2data.model.reward import MEMScorer  # noqa: E402
 from sc2data.pairs.loader import PairSet  # noqa: E402
+from sc2data.schema import Schema  # noqa: E402
 from sc2data.testing.synthetic_pairs import stacks  # noqa: E402
 from tests.mem_helpers import SMALL_SCHEMA, tiny_pairset, train_tiny  # noqa: E402
 

@@ -10,9 +10,8 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from sc2data import load_model  # noqa: E402
-from sc2data.ground._pysc2 import units  # noqa: E402
+from sc2data._pysc2 import units  # noqa: E402
 from sc2data.ground.errors import Sc2DataError  # noqa: E402
-from sc2data.ground.schema import Schema  # noqa: E402
 from sc2data.model.mem import (  # noqa: E402
     MEM,
     ModelConfig,
@@ -22,6 +21,7 @@ from sc2data.model.mem import (  # noqa: E402
     value_tables,
 )
 from sc2data.model.reward import MEMScorer  # noqa: E402
+from sc2data.schema import Schema  # noqa: E402
 from sc2data.testing.synthetic_pairs import stacks  # noqa: E402
 from tests.mem_helpers import SMALL_SCHEMA  # noqa: E402
 

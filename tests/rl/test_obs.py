@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from sc2data._pysc2 import actions, features, units
 from sc2data.game.sim import BuildMarinesEnv
-from sc2data.ground._pysc2 import actions, features, units
 from sc2data.ground.errors import Sc2DataError
 from sc2data.rl.envs import PAPER_FUNCTIONS, BuildMarinesGym
 from sc2data.rl.obs import UNIT_TYPES, ObsConfig, Observer

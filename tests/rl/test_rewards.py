@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from gymnasium import spaces
 
-from sc2data.ground._pysc2 import features
+from sc2data._pysc2 import features
 from sc2data.ground.errors import Sc2DataError
-from sc2data.ground.schema import Schema, StackBatch
 from sc2data.rl.narration import Narration, load_narration
 from sc2data.rl.rewards import NarrationShaping, RuleShaping, SparseReward, wrap_reward
 from sc2data.rulebase import blank_frame, set_field
+from sc2data.schema import Schema, StackBatch
 
 
 def as_obs(frame: dict[str, np.ndarray]) -> dict[str, np.ndarray]:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sc2data.ground._pysc2 import units
+from sc2data._pysc2 import units
 from sc2data.rulebase import SCREEN_PX_PER_UNIT as K
 from sc2data.rulebase import blank_frame, paint_disk, pixel_count, stack
 from sc2data.rules.build_supply_depot import BuildSupplyDepot

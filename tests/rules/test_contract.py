@@ -7,9 +7,9 @@ import sys
 import numpy as np
 import pytest
 
-from sc2data.ground.schema import Schema, StackBatch
 from sc2data.labels.registry import Registered, load_registry
 from sc2data.rulebase import RULE_ID, blank_frame, is_schema_key, stack, synthetic_batch
+from sc2data.schema import Schema, StackBatch
 
 REGISTRY = load_registry()
 

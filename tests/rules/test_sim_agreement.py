@@ -20,12 +20,12 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
+from sc2data._pysc2 import units
 from sc2data.game.agents import make_agent
 from sc2data.game.env import make_env
-from sc2data.ground._pysc2 import units
-from sc2data.ground.schema import Schema
 from sc2data.labels.registry import load_registry
 from sc2data.rulebase import stack
+from sc2data.schema import Schema
 
 T = units.Terran
 EPISODES = (("reduced-random", 0), ("reduced-random", 1), ("reduced-random", 2),

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 # isort: off
-import sc2data.ground._pysc2  # noqa: F401  (sets up protobuf before s2clientprotocol loads)
+import sc2data._pysc2  # noqa: F401  (sets up protobuf before s2clientprotocol loads)
 from s2clientprotocol import error_pb2
 # isort: on
 

@@ -17,11 +17,11 @@ from typing import Any
 
 import numpy as np
 
+from sc2data._pysc2 import actions
 from sc2data.game.sim import mapdata as md
 from sc2data.game.sim.game import Game
 from sc2data.game.sim.handlers import HANDLERS
 from sc2data.game.sim.store import PLAYER_SELF, Unit
-from sc2data.ground._pysc2 import actions
 
 F = actions.FUNCTIONS
 _SCREEN_SIZES = (md.SCREEN, md.SCREEN)

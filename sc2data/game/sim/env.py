@@ -1,7 +1,7 @@
 """``BuildMarinesEnv``: the embedded simulator behind pysc2's ``environment.Base`` interface.
 
 It behaves as ``sc2_env.SC2Env(map_name="BuildMarines", ...)`` does for one Terran agent with
-our interface format (:func:`sc2data.ground._pysc2.interface_format`): ``reset``/``step`` return a tuple
+our interface format (:func:`sc2data._pysc2.interface_format`): ``reset``/``step`` return a tuple
 of one ``TimeStep``; the first has reward 0 and discount 0, later ones reward = the change in
 ``score_cumulative[0]`` (+1 per marine made) and discount 1; the map's timer ends the episode
 after 14,400 game loops with a LAST step of discount 0 (pysc2 zeroes it when the game reports
@@ -15,13 +15,13 @@ import os
 from collections.abc import Sequence
 from typing import Any
 
+from sc2data._pysc2 import environment, features, interface_format
 from sc2data.game.sim import mapdata as md
 from sc2data.game.sim import obsdict
 from sc2data.game.sim.commands import Commands
 from sc2data.game.sim.game import Game
 from sc2data.game.sim.observe import Renderer
 from sc2data.game.sim.store import Event
-from sc2data.ground._pysc2 import environment, features, interface_format
 from sc2data.ground.vocab import MAP_NAME, STEP_MUL
 
 

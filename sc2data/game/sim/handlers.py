@@ -13,10 +13,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from sc2data._pysc2 import actions
 from sc2data.game.sim import mapdata as md
 from sc2data.game.sim.codes import CANT_TARGET_THAT_UNIT, ERROR
 from sc2data.game.sim.store import PLAYER_SELF, Unit
-from sc2data.ground._pysc2 import actions
 
 if TYPE_CHECKING:
     from sc2data.game.sim.commands import Commands

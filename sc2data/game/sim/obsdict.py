@@ -12,11 +12,11 @@ from typing import Any
 
 import numpy as np
 
+from sc2data._pysc2 import actions, features
 from sc2data.game.sim import mapdata as md
 from sc2data.game.sim.commands import Commands
 from sc2data.game.sim.game import Game
 from sc2data.game.sim.store import PLAYER_SELF, Unit
-from sc2data.ground._pysc2 import actions, features
 from sc2data.ground.vocab import MAP_NAME
 
 named_array = features.named_array

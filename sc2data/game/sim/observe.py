@@ -29,9 +29,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from sc2data._pysc2 import features
 from sc2data.game.sim import mapdata as md
 from sc2data.game.sim.game import Game
-from sc2data.ground._pysc2 import features
 
 S = features.SCREEN_FEATURES
 M = features.MINIMAP_FEATURES

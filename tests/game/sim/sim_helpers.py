@@ -5,10 +5,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+from sc2data._pysc2 import actions, environment
 from sc2data.game.sim import BuildMarinesEnv
 from sc2data.game.sim import mapdata as md
 from sc2data.game.sim.store import Unit
-from sc2data.ground._pysc2 import actions, environment
 
 F = actions.FUNCTIONS
 

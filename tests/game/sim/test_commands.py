@@ -6,10 +6,10 @@ from typing import Any
 
 import pytest
 
+from sc2data._pysc2 import actions, features, sc2_env
 from sc2data.game.env import interface_format
 from sc2data.game.sim import mapdata as md
 from sc2data.game.sim.commands import functions_for
-from sc2data.ground._pysc2 import actions, features, sc2_env
 from tests.game.sim.sim_helpers import (
     F,
     new_env,

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from sc2data._pysc2 import actions, environment
 from sc2data.game.sim import EVENT_KINDS, BuildMarinesEnv, Event
 from sc2data.game.sim import mapdata as md
-from sc2data.ground._pysc2 import actions, environment
 from tests.game.sim.sim_helpers import (
     BARRACKS_SITE,
     F,

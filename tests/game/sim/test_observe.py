@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from sc2data._pysc2 import features
 from sc2data.game.sim import mapdata as md
 from sc2data.game.sim.observe import DiskStamp, stamp
-from sc2data.ground._pysc2 import features
 from tests.game.sim.sim_helpers import (
     DEPOT_SITE,
     F,

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from sc2data._pysc2 import features
 from sc2data.game.sim import mapdata as md
-from sc2data.ground._pysc2 import features
 from tests.game.sim.sim_helpers import (
     F,
     new_env,

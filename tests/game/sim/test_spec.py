@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from sc2data._pysc2 import actions, features
 from sc2data.game.env import interface_format, make_env
 from sc2data.game.sim import BuildMarinesEnv
-from sc2data.ground._pysc2 import actions, features
 from tests.game.sim.sim_helpers import F, new_env, step
 
 named_array = features.named_array

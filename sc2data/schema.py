@@ -19,7 +19,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from sc2data.ground._pysc2 import features
+from sc2data._pysc2 import features
 from sc2data.ground.formats import shape_fault
 from sc2data.ground.vocab import MINIMAP_SIZE, SCREEN_SIZE
 

@@ -29,7 +29,7 @@ if TYPE_CHECKING:
     from sc2data.game.agents import make_agent  # noqa: F401
     from sc2data.game.env import make_env  # noqa: F401
     from sc2data.ground.stacker import Stacker  # noqa: F401
-    from sc2data.model.reward import load_model  # noqa: F401
+    from sc2data.model.scorer import load_model  # noqa: F401
     from sc2data.schema import Schema, StackBatch  # noqa: F401
 
 _WHERE = {
@@ -37,7 +37,7 @@ _WHERE = {
     "open_dataset": "sc2data.data.dataset",
     "make_agent": "sc2data.game.agents",
     "make_env": "sc2data.game.env",
-    "load_model": "sc2data.model.reward",
+    "load_model": "sc2data.model.scorer",
     "Schema": "sc2data.schema",
     "StackBatch": "sc2data.schema",
     "Stacker": "sc2data.ground.stacker",

@@ -101,7 +101,8 @@ def build(recipe: Recipe, out: str | os.PathLike[str], *, workers: int = 1,
             from None
     try:
         with FolderLock(out, "build", remove=True):
-            return _stages(recipe, config, out, data, report, workers, progress, ray, rules_dir)
+            return _stages(recipe, config, out=out, data=data, report=report, workers=workers,
+                           progress=progress, ray=ray, rules_dir=rules_dir)
     finally:
         if made and [p.name for p in out.iterdir()] in ([LOCK], []):  # failed before any write
             shutil.rmtree(out, ignore_errors=True)
@@ -124,7 +125,7 @@ def grow_to(shortage: NotEnoughStates, have: int, asked: int, rounds: int) -> in
                           f"[rollout] episodes = {want} in the recipe and rerun", None)
 
 
-def _stages(recipe: Recipe, config: RolloutConfig, out: Path, data: Path, report: BuildReport,
+def _stages(recipe: Recipe, config: RolloutConfig, *, out: Path, data: Path, report: BuildReport,
             workers: int, progress: bool | None, ray: RayOptions | None,
             rules_dir: Path | str | None) -> BuildReport:
     """The three stages, under the build folder's lock; the first two again for each grow."""
@@ -132,7 +133,8 @@ def _stages(recipe: Recipe, config: RolloutConfig, out: Path, data: Path, report
     from sc2data.pairs.pairset import make_pairset
 
     for rounds in range(GROW_ROUNDS + 1):
-        _data(recipe, config, data, report, workers, progress, ray, rules_dir)
+        _data(recipe, config, data=data, report=report, workers=workers, progress=progress,
+              ray=ray, rules_dir=rules_dir)
         t = time.perf_counter()
         try:
             pairs = make_pairset(recipe, data, out / PAIRS_DIR, progress=progress)
@@ -148,7 +150,7 @@ def _stages(recipe: Recipe, config: RolloutConfig, out: Path, data: Path, report
     raise AssertionError("grow_to ends the build after GROW_ROUNDS rounds")
 
 
-def _data(recipe: Recipe, config: RolloutConfig, data: Path, report: BuildReport, workers: int,
+def _data(recipe: Recipe, config: RolloutConfig, *, data: Path, report: BuildReport, workers: int,
           progress: bool | None, ray: RayOptions | None, rules_dir: Path | str | None) -> None:
     """Roll out and label ``config``'s data (on one Ray instance or cluster with ``ray``)."""
     from sc2data.scaleout.where import run_label, run_rollout, session

@@ -304,7 +304,7 @@ def _run(folder: Path) -> tuple[list[str], list[str]]:
             return [f"{folder} has no state.json (written by an older sc2data, or interrupted "
                     f"before its first epoch)"], []
         check_run(folder, allow_unfinished=True, files=tuple(state["sha256"]))
-        from sc2data.model.reward import load_model
+        from sc2data.model.scorer import load_model
 
         load_model(folder, allow_unfinished=True)
     except Sc2DataError as e:

@@ -3,8 +3,8 @@
 Ground (``sc2data.ground``; and at the root ``rulebase``, ``schema``, ``_pysc2``, what rule plugins
 import) ← game ← data ← labels ← pairs ← model, with RL, scale-out and testing helpers beside the
 top; the command line (``sc2data.cli``), the build driver, the folder inspector and the package's
-lazy public API above all. A module may import its own level or lower ones, never a higher one — at module level or
-inside a function (only imports for type checking are exempt).
+lazy public API above all. A module may import its own level or lower ones, never a higher one —
+at module level or inside a function (only imports for type checking are exempt).
 """
 
 from __future__ import annotations

@@ -447,7 +447,8 @@ def evaluate_cmd(
     """Accuracy (beside the paper's), ROC-AUC, retrieval, phrasings; writes RUN/eval.json."""
     from sc2data.model.evaluate import evaluate, format_report
 
-    report = evaluate(run, data, device, text, allow_unfinished, other_data, progress)
+    report = evaluate(run, data, device=device, texts=text, allow_unfinished=allow_unfinished,
+                      other_data=other_data, progress=progress)
     typer.echo(format_report(report))
     typer.echo(f"wrote {report['written_to']}")
 
@@ -471,7 +472,8 @@ def tsne_cmd(
     """A t-SNE map of state and command embeddings, like the paper's Fig. 3."""
     from sc2data.model.evaluate import tsne
 
-    path = tsne(run, data, out, states, seed, text, device, allow_unfinished, progress)
+    path = tsne(run, data, out=out, states=states, seed=seed, texts=text, device=device,
+                allow_unfinished=allow_unfinished, progress=progress)
     typer.echo(f"wrote {path}")
 
 

@@ -41,7 +41,7 @@ from sc2data.labels.apply import (
     write_part,
 )
 from sc2data.labels.registry import Registered, load_registry
-from sc2data.labels.source import Source, Unit, dataset_source
+from sc2data.labels.source import Source, WorkUnit, dataset_source
 from sc2data.labels.store import (
     FORMAT_VERSION,
     LABELS_FILE,
@@ -56,7 +56,7 @@ PARTS_DIR = ".labels-parts"
 DEFAULT_BATCH = 256
 """Stacks per rule call: small enough that a building rule's temporaries stay in cache."""
 
-UnitRunner = Callable[[Sequence[tuple[Unit, Path]], Sequence[str], int, Bar], None]
+UnitRunner = Callable[[Sequence[tuple[WorkUnit, Path]], Sequence[str], int, Bar], None]
 """Labels units elsewhere than in this process (Ray tasks: ``sc2data.scaleout.driver.RayUnits``):
 ``runner([(unit, part path), …], keys, batch_size, bar)``, each through :func:`write_part`."""
 

@@ -16,7 +16,7 @@ from sc2data.ground.progress import Bar
 from sc2data.ground.workers import run_parallel
 from sc2data.labels.apply import fingerprint, parts_run, write_part
 from sc2data.labels.registry import Registered, load_registry
-from sc2data.labels.source import Source, Unit, dataset_source
+from sc2data.labels.source import Source, WorkUnit, dataset_source
 
 Selection = tuple[tuple[str, ...] | None, tuple[str, ...], str | None]
 """``(include, exclude, rules_dir)``: how a process re-selects the run's rules."""
@@ -62,7 +62,7 @@ class LocalUnits:
     data: Path
     selection: Selection
 
-    def __call__(self, todo: Sequence[tuple[Unit, Path]], keys: Sequence[str], batch_size: int,
+    def __call__(self, todo: Sequence[tuple[WorkUnit, Path]], keys: Sequence[str], batch_size: int,
                  bar: Bar) -> None:
 
         if not todo:

@@ -33,8 +33,8 @@ from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.files import check_out, write_atomic
 from sc2data.ground.progress import bar as progress_bar
 from sc2data.ground.vocab import SPLITS
-from sc2data.model.reward import MEMScorer, load_model, pairwise
 from sc2data.model.runs import EVAL, TSNE
+from sc2data.model.scorer import MEMScorer, load_model, pairwise
 from sc2data.pairs.loader import PairSet
 
 PAPER = {"train": 0.9561, "val": 0.8235, "test": 0.8040}
@@ -110,7 +110,7 @@ def parse_text_option(value: str, ids: Sequence[str]) -> tuple[str, str]:
     return phrase, cid
 
 
-def evaluate(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None,
+def evaluate(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None, *,
              device: str = "auto", texts: Sequence[str] = (),
              allow_unfinished: bool = False, other_data: bool = False,
              progress: bool | None = None) -> dict[str, Any]:
@@ -325,7 +325,7 @@ def separation_note(states: np.ndarray, labels: np.ndarray, commands: np.ndarray
             f"nearest their own command (chance {1 / len(ids):.0%})")
 
 
-def tsne(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None,
+def tsne(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None, *,
          out: str | os.PathLike[str] | None = None, states: int = 2000, seed: int = 0,
          texts: Sequence[str] = (), device: str = "auto", allow_unfinished: bool = False,
          progress: bool | None = None) -> Path:

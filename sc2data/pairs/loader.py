@@ -157,7 +157,7 @@ class PairLoader:
     """
 
     def __init__(self, packed: PackedSplit, state: np.ndarray, text: np.ndarray,
-                 target: np.ndarray, batch_size: int, keys: Sequence[str], shuffle: bool,
+                 target: np.ndarray, *, batch_size: int, keys: Sequence[str], shuffle: bool,
                  seed: int = 0, window: int = 4, prefetch: int = 16,
                  transform: Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]] | None = None,
                  collate: Callable[[dict[str, np.ndarray]], Any] | None = None) -> None:

@@ -126,7 +126,7 @@ def agreement(run: Path, mem: Path, *, episodes: int = 3, deterministic: bool = 
     from sb3_contrib import MaskablePPO
 
     from sc2data.labels.registry import call, load_registry
-    from sc2data.model.reward import load_model
+    from sc2data.model.scorer import load_model
     from sc2data.rl.envs import BuildMarinesGym
     from sc2data.rulebase import schema_for, stack
 

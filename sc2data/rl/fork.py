@@ -33,7 +33,7 @@ def fork(run: Path, out: Path, mem: Path) -> dict[str, Any]:
     if cfg.reward != "narration":
         raise Sc2DataError(f"{run} was trained with --reward {cfg.reward}; only a narration run "
                            f"has a MEM to replace")
-    from sc2data.model.reward import load_model
+    from sc2data.model.scorer import load_model
 
     load_model(mem)  # a one-line error unless it is a trained MEM
     if out.exists():

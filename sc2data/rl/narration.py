@@ -69,7 +69,7 @@ def _from_toml(path: Path, text: str) -> list[str]:
 def check_readable(narration: Narration, scorer: Any) -> None:
     """Refuse a command with a word outside the MEM's vocabulary (the MEM would drop it silently).
 
-    ``scorer`` is a :class:`~sc2data.model.reward.MEMScorer`; a stand-in without ``words`` (a
+    ``scorer`` is a :class:`~sc2data.model.scorer.MEMScorer`; a stand-in without ``words`` (a
     test's fake scorer) is not checked.
     """
     words = getattr(scorer, "words", None)

@@ -270,7 +270,7 @@ def check_config(cfg: RLConfig) -> tuple[Any, Any]:
         return None, None
     if cfg.mem is None:
         raise Sc2DataError("--reward narration needs --mem RUN (a trained MEM: sc2data train)")
-    from sc2data.model.reward import load_model
+    from sc2data.model.scorer import load_model
     from sc2data.rl.narration import check_readable, load_narration
 
     narration = load_narration(cfg.narration)

@@ -46,7 +46,7 @@ if TYPE_CHECKING:  # types only: the stages import this module, not the other wa
     from sc2data.data.rollout import AgentFactory, EnvFactory, RolloutConfig, RolloutSummary
     from sc2data.labels.label import LabelSummary
     from sc2data.labels.remote import Selection
-    from sc2data.labels.source import Unit
+    from sc2data.labels.source import WorkUnit
 
 DEFAULT_RETRIES = 2
 """Extra attempts per task after a worker death, a crashed instance or a hang."""
@@ -411,7 +411,7 @@ class RayUnits:
         self.options, self.data, self.selection = options, data, selection
         self.report = ScaleoutReport()
 
-    def __call__(self, todo: Sequence[tuple[Unit, Path]], keys: Sequence[str], batch_size: int,
+    def __call__(self, todo: Sequence[tuple[WorkUnit, Path]], keys: Sequence[str], batch_size: int,
                  bar: Bar) -> None:
         if not todo:
             return

@@ -18,7 +18,7 @@ from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.files import PARTIAL, FolderLock
 from sc2data.labels.label import PARTS_DIR, label
 from sc2data.labels.registry import Registered, RuleError, load_registry, load_rules_dir
-from sc2data.labels.source import Source, Unit
+from sc2data.labels.source import Source, WorkUnit
 from sc2data.labels.store import LABELS_FILE, STACKS_FILE, SUMS_FILE, read_labels, read_meta
 from sc2data.rulebase import (
     SCREEN_PX_PER_UNIT,
@@ -69,7 +69,7 @@ EXPECTED = {(s, r) for s, r in EVENTS.items()} | {(16, "build_scv"), (16, "train
 
 
 def make_unit(episode: int, calls: list | None = None, fail_at: int | None = None,
-              schema: Schema = Schema.paper()) -> Unit:
+              schema: Schema = Schema.paper()) -> WorkUnit:
     frames = episode_frames(schema)
     pairs = list(zip(frames[:-1], frames[1:]))
 
@@ -84,7 +84,7 @@ def make_unit(episode: int, calls: list | None = None, fail_at: int | None = Non
             steps = np.arange(start + 1, start + 1 + len(batch))
             yield np.full(len(batch), episode), steps, batch
 
-    return Unit(key=f"shard-{episode}", stacks=len(pairs), batches=batches)
+    return WorkUnit(key=f"shard-{episode}", stacks=len(pairs), batches=batches)
 
 
 def source(n: int = 3, **kw) -> Source:  # type: ignore[no-untyped-def]

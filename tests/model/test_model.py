@@ -20,7 +20,7 @@ from sc2data.model.mem import (  # noqa: E402
     to_tensors,
     value_tables,
 )
-from sc2data.model.reward import MEMScorer  # noqa: E402
+from sc2data.model.scorer import MEMScorer  # noqa: E402
 from sc2data.schema import Schema  # noqa: E402
 from sc2data.testing.synthetic_pairs import stacks  # noqa: E402
 from tests.mem_helpers import SMALL_SCHEMA  # noqa: E402

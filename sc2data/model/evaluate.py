@@ -332,11 +332,6 @@ def tsne(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None
     """Plot test-state and command embeddings in one t-SNE map (the paper's Fig. 3) as a PNG."""
     if out is not None:
         check_out(Path(out))
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     run = Path(run)
     scorer = load_model(run, device, allow_unfinished=allow_unfinished)
     pairset = _pairset(scorer, data)
@@ -349,17 +344,47 @@ def tsne(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None
     rows, labels = rows[pick], labels[pick]
     emb = _embed_split(scorer, pairset, split, progress)[rows]
     ids = [str(c["id"]) for c in pairset.commands]
+    marks = _marks(pairset, ids, texts)
+    text_e = scorer.embed_texts([m[0] for m in marks])
+    warning = separation_note(emb, labels, text_e[:len(ids)], ids)
+    xy = _tsne(np.concatenate([emb, text_e]), seed)
+    title = (f"MEM embedding space, t-SNE of {len(emb)} {split} states and "
+             f"{len(marks)} commands ({run.name})")
+    png = _draw_tsne(xy[:len(emb)], labels, xy[len(emb):], marks, canon=pairset.texts(),
+                     ids=ids, title=title, warning=warning)
+    path = Path(out) if out else run / TSNE
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_atomic(path, png)
+    except OSError as e:
+        raise Sc2DataError(f"cannot write {path}: {e.strerror or e}; choose another --out") \
+            from None
+    return path
+
+
+def _marks(pairset: PairSet, ids: list[str], texts: Sequence[str]) -> list[tuple[str, str, str]]:
+    """(text, command id, kind) of every command phrasing drawn: canonical, training phrasings,
+    held-out paraphrases, and ``--text`` phrases ("PHRASE=command_id" is coloured as its
+    command; a bare phrase in black)."""
     canon = pairset.texts()
     marks = [(canon[i], i, "canonical") for i in ids]
     marks += [(p, i, "training phrasing") for i, ps in pairset.train_paraphrases().items()
               for p in ps]
     marks += [(p, i, "held-out paraphrase") for i, ps in pairset.paraphrases().items() for p in ps]
-    for t in texts:  # "PHRASE=command_id" is coloured as its command; a bare phrase in black
+    for t in texts:
         marks.append((*parse_text_option(t, ids), "extra") if "=" in t else (t, "", "extra"))
-    text_e = scorer.embed_texts([m[0] for m in marks])
-    warning = separation_note(emb, labels, text_e[:len(ids)], ids)
-    xy = _tsne(np.concatenate([emb, text_e]), seed)
-    s_xy, t_xy = xy[:len(emb)], xy[len(emb):]
+    return marks
+
+
+def _draw_tsne(s_xy: np.ndarray, labels: np.ndarray, t_xy: np.ndarray,
+               marks: list[tuple[str, str, str]], *, canon: dict[str, str], ids: list[str],
+               title: str, warning: str | None) -> bytes:
+    """The t-SNE map as PNG bytes: states coloured by command (null in grey), each phrasing a
+    labelled mark."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(11, 9))
     colours = {cid: plt.get_cmap("tab10")(k) for k, cid in enumerate(ids)}
@@ -388,27 +413,19 @@ def tsne(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None
             name = {"canonical": "canonical command", "extra": "--text phrase"}.get(kind, kind)
             ax.scatter([], [], marker=marker, color="white", edgecolors="black", label=name)
     ax.legend(loc="best", fontsize=8, markerscale=1.5)
-    ax.set_title(f"MEM embedding space, t-SNE of {len(emb)} {split} states and "
-                 f"{len(marks)} commands ({run.name})")
+    ax.set_title(title)
     if warning:
         ax.text(0.5, 0.98, warning, transform=ax.transAxes, ha="center", va="top", fontsize=11,
                 color="darkred", zorder=7,
                 bbox={"boxstyle": "round", "facecolor": "white", "edgecolor": "darkred"})
     ax.set_xticks([])
     ax.set_yticks([])
-    path = Path(out) if out else run / TSNE
     fig.tight_layout()
     _declutter(fig, notes)
     png = io.BytesIO()
     fig.savefig(png, format="png", dpi=130)
     plt.close(fig)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        write_atomic(path, png.getvalue())
-    except OSError as e:
-        raise Sc2DataError(f"cannot write {path}: {e.strerror or e}; choose another --out") \
-            from None
-    return path
+    return png.getvalue()
 
 
 def _declutter(fig: Any, notes: list[Any]) -> None:

@@ -27,7 +27,7 @@ from sc2data.ground.files import FolderLock, write_atomic
 from sc2data.ground.progress import Bar
 from sc2data.ground.progress import bar as progress_bar
 from sc2data.ground.provenance import versions
-from sc2data.ground.resume import differences
+from sc2data.ground.resume import STATE, differences
 from sc2data.labels.apply import (
     check_requirements,
     fingerprint,
@@ -132,7 +132,7 @@ def _run(source: Source, rules: Sequence[Registered], out: Path, fp: str, batch_
 
     keys = required_keys(rules, source.schema)
     parts = out / PARTS_DIR
-    state = parts / "state.json"
+    state = parts / STATE
     if parts.is_dir() and parts_run(state) != fp:
         shutil.rmtree(parts)  # parts of other rules or another dataset: not resumable
     parts.mkdir(parents=True, exist_ok=True)

@@ -13,6 +13,7 @@ from pathlib import Path
 from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.files import PARTIAL
 from sc2data.ground.progress import Bar
+from sc2data.ground.resume import STATE
 from sc2data.ground.workers import run_parallel
 from sc2data.labels.apply import fingerprint, parts_run, write_part
 from sc2data.labels.registry import Registered, load_registry
@@ -37,7 +38,7 @@ def label_unit(data: str, selection: Selection, unit_key: str, part: str,
     ``selection`` = (include, exclude, rules_dir) and checked to be the run's (its parts
     folder's ``state.json``), then the unit is written with :func:`write_part`."""
     include, exclude, rules_dir = selection
-    run = str(parts_run(Path(part).parent / "state.json"))
+    run = str(parts_run(Path(part).parent / STATE))
     rules, source = _rules_and_source(data, (None if include is None else tuple(include),
                                              tuple(exclude), rules_dir), run)
     if fingerprint(rules, source.info) != run:

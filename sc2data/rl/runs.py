@@ -35,6 +35,7 @@ from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.files import sha256_file, write_atomic
 from sc2data.ground.formats import Shape, loads
 from sc2data.ground.resume import CONFIG, EVAL, STATE
+from sc2data.model.runs import BEST
 
 __all__ = ["CONFIG", "EVAL", "STATE", "sha256_file"]
 
@@ -167,6 +168,6 @@ def input_digests(narration: Any, mem: str | None) -> dict[str, str]:
         out["narration_sha256"] = _sha("\n".join(narration.commands).encode())
     if mem is not None:
         path = Path(mem)
-        ckpt = path / "best.pt" if path.is_dir() else path
+        ckpt = path / BEST if path.is_dir() else path
         out["mem_sha256"] = sha256_file(ckpt)
     return out

@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 BIN    := $(VENV)/bin
 DEMO   ?= demo-out
 
-.PHONY: demo rl-demo test bench clean
+.PHONY: demo rl-demo test lint bench clean
 
 # Byte-code is written on first import, as Python does by default: some machines set
 # PYTHONDONTWRITEBYTECODE, and then every process compiles torch again (suite 7:51 → 13:35).
@@ -39,6 +39,10 @@ $(DEMO)/rl-baselines/baselines.json: | $(VENV)/.stamp
 # Two processes (pytest-xdist), a test file to each at a time: module fixtures are built once.
 test: $(VENV)/.stamp
 	$(PY) -m pytest -q -n 2 --dist loadfile
+
+# Ruff with the rules in pyproject.toml ([tool.ruff.lint]); CI runs it before the tests.
+lint: $(VENV)/.stamp
+	$(BIN)/ruff check
 
 bench: $(VENV)/.stamp
 	$(PY) benchmarks/bench_env.py

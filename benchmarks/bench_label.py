@@ -2,7 +2,8 @@
 
 * rules only — every built-in rule (with the labeller's shape/dtype checks) over in-memory
   batches of real stacks: one simulator episode per agent, tiled to ``--stacks``;
-* end to end — ``sc2data.labels.label.label_dataset`` on a dataset rolled out with ``sc2data rollout``
+* end to end — ``sc2data.labels.label.label_dataset`` on a dataset rolled out with
+  ``sc2data rollout``
   (``--data DIR``), reading only the keys the rules require, writing the Parquet files.
 
 Prints the median of ``--repeats`` runs, as stacks per second of wall-clock time and per second of

@@ -2,7 +2,8 @@
 
 1. ``build_pairs`` on labels shaped like the paper recipe's data (2,400 reduced-random episodes of
    1,800 steps, each command firing at the rate measured on the simulator), timed end to end.
-2. Packing: ``sc2data.pairs.pairset._pack_split`` copying a pair set's stacks from a real rolled-out,
+2. Packing: ``sc2data.pairs.pairset._pack_split`` copying a pair set's stacks from a real
+   rolled-out,
    labelled dataset (``--data``, e.g. the demo's ``demo-out/data/rollout``) into a packed file.
 
     python benchmarks/bench_pairs.py --data demo-out/data/rollout --repeats 3
@@ -19,8 +20,8 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
+from sc2data.ground.recipe import load
 from sc2data.pairs.draw import Labelled, build_pairs
-from sc2data.recipe import load
 
 ROOT = Path(__file__).resolve().parents[1]
 # Fire rates per stack measured on 20 reduced-random episodes (smoke recipe, seed 0).

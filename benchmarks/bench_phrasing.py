@@ -62,7 +62,7 @@ def main() -> None:
     pairs = {"base": out / "data" / "pairs", "train": out / "pairs-train"}
     sh([*SC2DATA, "pair", str(HERE / "phrasings.toml"), "--data", str(out / "data" / "rollout"),
         "--out", str(pairs["train"]), "--no-progress"], log)
-    from sc2data.recipe import load
+    from sc2data.ground.recipe import load
 
     train_phrases = [f"{p}={c.id}" for c in load(HERE / "phrasings.toml").commands
                      for p in c.train_paraphrases]

@@ -34,7 +34,7 @@ from sc2data._pysc2 import units
 from sc2data.data.rollout import RolloutConfig, episode_seeds, rollout
 from sc2data.game.agents import make_agent
 from sc2data.game.env import make_env
-from sc2data.vocab import EPISODE_STEPS
+from sc2data.ground.vocab import EPISODE_STEPS
 
 SUBSET = ("screen/unit_type", "screen/unit_hit_points", "player")
 TARGET_EVENTS = 10_000

@@ -118,12 +118,14 @@ def breakdown(run: Path, device: str, threads: int, batch: int) -> None:
         for g, inp in model.state.groups:
             a = (x.get(f"{g}.idx"), x.get(f"{g}.scalar"))
             img = inp(*a)
-            rows.append((f"reference: {g} one-hot image", ms(lambda: inp(*a))))
-            rows.append((f"reference: {g} CNN", ms(lambda: model.state.towers[g](img))))
+            rows.append((f"reference: {g} one-hot image",
+                         ms(lambda inp=inp, a=a: inp(*a))))
+            rows.append((f"reference: {g} CNN",
+                         ms(lambda g=g, img=img: model.state.towers[g](img))))
         rows.append(("reference: whole state encoder", ms(lambda: model.state(x))))
         if scorer.fast is not None:  # this checkout's CPU path (sc2data.model.infer)
             for g, grp in scorer.fast.groups:
-                rows.append((f"fast: {g} cell counts + CNN", ms(lambda: grp(arrays))))
+                rows.append((f"fast: {g} cell counts + CNN", ms(lambda grp=grp: grp(arrays))))
             rows.append(("fast: whole state encoder", ms(lambda: scorer.fast(arrays))))
         rows.append(("text embedding (cached per text)",
                      ms(lambda: scorer.embed_texts(["build a barracks"]))))

@@ -1,7 +1,7 @@
 """Start-up time of the ``sc2data`` command: seconds from exec to exit for cheap commands.
 
 Every CLI call (and so every CLI test, doc block and ``make demo`` step) pays the interpreter's
-start and the imports of :mod:`sc2data.commands` before any work. This times whole processes —
+start and the imports of :mod:`sc2data.cli.commands` before any work. This times whole processes —
 ``python -m sc2data.cli ARGS`` — for ``--version``, ``--help`` and ``info DATA`` (a small dataset
 rolled out once into a temporary folder), and ``python -c "import torch"`` for scale. Figures are
 medians over ``--repeats`` runs.

@@ -44,8 +44,9 @@ def loader_alone(data: Path, pool: int, categorical: str, passes: int, gpu: bool
     tables = M.value_tables(ps.schema, [packed.read(0, min(len(packed), 1024))], cfg.max_table)
     model = M.MEM(ps.schema, tables, np.zeros((2, 50), np.float32), cfg)
     pin = gpu and torch.cuda.is_available()
-    loader = PairLoader(packed, p.state, np.zeros(len(p), np.int64), p.target, 32,
-                        model.state.keys(), True, transform=None if gpu else model.state.pack,
+    loader = PairLoader(packed, p.state, np.zeros(len(p), np.int64), p.target, batch_size=32,
+                        keys=model.state.keys(), shuffle=True,
+                        transform=None if gpu else model.state.pack,
                         collate=lambda rows: M.to_tensors(rows, pin=pin))
     rates = []
     for e in range(passes):

@@ -32,7 +32,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-
 from sc2data._pysc2 import actions, features, units  # first: it makes pysc2 importable
 
 from pysc2.agents.base_agent import BaseAgent  # isort: skip

@@ -5,7 +5,8 @@ every core, so one job at a time fills the machine; ``--jobs`` runs several), th
 evaluate`` on seeded episodes training never used (both start sides, sampled and argmax); the
 reference agents are played once on the same episodes (``rl baselines``) and every action
 space's runs are compared with ``rl compare`` (IQM, stratified-bootstrap CIs, probability of
-improvement), into ``OUT/<space>-compare/``. Everything is resumable: rerunning the same command resumes unfinished training runs
+improvement), into ``OUT/<space>-compare/``. Everything is resumable: rerunning the same
+command resumes unfinished training runs
 (``rl train`` resumes itself) and skips evaluations already written for the trained step count.
 Narration runs wait until the MEM run (``--mem``) has finished training. Prints and writes
 ``OUT/summary.md`` (the table of BENCHMARKS.md) and one learning-curve PNG per action space.

@@ -1,7 +1,7 @@
 """pysc2 for sc2data's modules: every one imports pysc2 through this one.
 
 pysc2 4.0.0's two breakages on Python 3.11 are fixed by the import hook of
-:mod:`sc2data._pysc2_compat` (which ``import sc2data`` installs too, so that a user's own
+:mod:`sc2data.ground._pysc2_compat` (which ``import sc2data`` installs too, so that a user's own
 ``from pysc2.lib import features`` works after it); this module makes sure it is installed first.
 
 ``sc2_env`` (the real game's environment) is imported on first use: through its human renderer
@@ -14,8 +14,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from sc2data._pysc2_compat import install
-from sc2data.vocab import MINIMAP_SIZE, SCREEN_SIZE
+from sc2data.ground._pysc2_compat import install
+from sc2data.ground.vocab import MINIMAP_SIZE, SCREEN_SIZE
 
 install()
 from pysc2.agents import base_agent  # noqa: E402
@@ -23,7 +23,7 @@ from pysc2.env import environment  # noqa: E402
 from pysc2.lib import actions, buffs, colors, features, point, units  # noqa: E402
 
 __all__ = ["actions", "base_agent", "buffs", "colors", "environment", "features",
-           "interface_format", "point", "sc2_env", "units"]
+           "interface_format", "point", "sc2_env", "units"]  # noqa: F822  (sc2_env: lazy)
 
 
 def __getattr__(name: str) -> Any:

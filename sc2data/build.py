@@ -18,7 +18,6 @@ episodes an earlier build grew it to.
 
 from __future__ import annotations
 
-import contextlib
 import os
 import shutil
 import time
@@ -26,10 +25,10 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from sc2data.cliopts import plural
-from sc2data.errors import Sc2DataError, reason
-from sc2data.files import LOCK, FolderLock, check_out
-from sc2data.recipe import MAX_EPISODES, Recipe
+from sc2data.cli.cliopts import plural
+from sc2data.ground.errors import Sc2DataError, reason
+from sc2data.ground.files import LOCK, FolderLock, check_out
+from sc2data.ground.recipe import MAX_EPISODES, Recipe
 
 if TYPE_CHECKING:
     from sc2data.data.rollout import RolloutConfig
@@ -68,7 +67,8 @@ def build(recipe: Recipe, out: str | os.PathLike[str], *, workers: int = 1,
           rules_dir: Path | str | None = None) -> BuildReport:
     """Run every stage of ``recipe`` into ``out``; stages already complete are kept.
 
-    ``ray`` (:class:`sc2data.scaleout.driver.RayOptions`): roll out and label as Ray tasks, on one Ray
+    ``ray`` (:class:`sc2data.scaleout.driver.RayOptions`): roll out and label as Ray tasks, on
+    one Ray
     instance or cluster for both stages; the data is the same either way. Grows the data when
     the pair stage finds too few states (see the module's docstring).
     """
@@ -101,7 +101,8 @@ def build(recipe: Recipe, out: str | os.PathLike[str], *, workers: int = 1,
             from None
     try:
         with FolderLock(out, "build", remove=True):
-            return _stages(recipe, config, out, data, report, workers, progress, ray, rules_dir)
+            return _stages(recipe, config, out=out, data=data, report=report, workers=workers,
+                           progress=progress, ray=ray, rules_dir=rules_dir)
     finally:
         if made and [p.name for p in out.iterdir()] in ([LOCK], []):  # failed before any write
             shutil.rmtree(out, ignore_errors=True)
@@ -124,7 +125,7 @@ def grow_to(shortage: NotEnoughStates, have: int, asked: int, rounds: int) -> in
                           f"[rollout] episodes = {want} in the recipe and rerun", None)
 
 
-def _stages(recipe: Recipe, config: RolloutConfig, out: Path, data: Path, report: BuildReport,
+def _stages(recipe: Recipe, config: RolloutConfig, *, out: Path, data: Path, report: BuildReport,
             workers: int, progress: bool | None, ray: RayOptions | None,
             rules_dir: Path | str | None) -> BuildReport:
     """The three stages, under the build folder's lock; the first two again for each grow."""
@@ -132,7 +133,8 @@ def _stages(recipe: Recipe, config: RolloutConfig, out: Path, data: Path, report
     from sc2data.pairs.pairset import make_pairset
 
     for rounds in range(GROW_ROUNDS + 1):
-        _data(recipe, config, data, report, workers, progress, ray, rules_dir)
+        _data(recipe, config, data=data, report=report, workers=workers, progress=progress,
+              ray=ray, rules_dir=rules_dir)
         t = time.perf_counter()
         try:
             pairs = make_pairset(recipe, data, out / PAIRS_DIR, progress=progress)
@@ -148,26 +150,15 @@ def _stages(recipe: Recipe, config: RolloutConfig, out: Path, data: Path, report
     raise AssertionError("grow_to ends the build after GROW_ROUNDS rounds")
 
 
-def _data(recipe: Recipe, config: RolloutConfig, data: Path, report: BuildReport, workers: int,
+def _data(recipe: Recipe, config: RolloutConfig, *, data: Path, report: BuildReport, workers: int,
           progress: bool | None, ray: RayOptions | None, rules_dir: Path | str | None) -> None:
     """Roll out and label ``config``'s data (on one Ray instance or cluster with ``ray``)."""
-    from sc2data.data.rollout import check_folder, rollout
-    from sc2data.labels.label import label_dataset
+    from sc2data.scaleout.where import run_label, run_rollout, session
 
-    with contextlib.ExitStack() as stack:
-        if ray is not None:
-            from sc2data.scaleout.driver import connect, label_on_ray, rollout_on_ray
-
-            config.validate()
-            check_folder(config, data)  # before Ray starts for nothing
-            stack.enter_context(connect(ray))
-
+    with session(ray, config, data):  # one Ray instance for both stages, with --ray
         t = time.perf_counter()
-        if ray is None:
-            r = rollout(config, data, workers=workers, progress=progress)
-        else:
-            r, retries = rollout_on_ray(config, data, ray, progress=progress)
-            report.lines += retries.lines() if retries.tasks else []
+        r, retries = run_rollout(config, data, workers=workers, progress=progress, ray=ray)
+        report.lines += retries
         report.add("rollout", t)
         grew = f", grown from {r.grew_from}" if r.grew_from is not None else ""
         report.lines.append(f"rollout: {plural(r.episodes, 'episode')}{grew}, "
@@ -175,12 +166,8 @@ def _data(recipe: Recipe, config: RolloutConfig, data: Path, report: BuildReport
                             f"written, {r.shards_kept} kept)")
 
         t = time.perf_counter()
-        if ray is None:
-            labels = label_dataset(data, include=list(recipe.rule_ids), progress=progress,
-                                   workers=workers, rules_dir=rules_dir)
-        else:
-            labels, retries = label_on_ray(data, ray, include=list(recipe.rule_ids),
-                                           progress=progress, rules_dir=rules_dir)
-            report.lines += retries.lines() if retries.tasks else []
+        labels, retries = run_label(data, workers=workers, ray=ray, include=list(recipe.rule_ids),
+                                    progress=progress, rules_dir=rules_dir)
+        report.lines += retries
         report.add("label", t)
         report.lines.append(labels.table())

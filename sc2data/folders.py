@@ -29,11 +29,13 @@ from typing import Any
 
 import numpy as np
 
-from sc2data.cliopts import plural
-from sc2data.errors import Sc2DataError
-from sc2data.files import writer
-from sc2data.formats import Shape, check_record, loads
-
+from sc2data.cli.cliopts import plural
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import writer
+from sc2data.ground.formats import Shape, loads
+from sc2data.ground.resume import CONFIG, EVAL, STATE, read_record, read_records
+from sc2data.model.runs import METRICS
+from sc2data.rl.runs import CURVE_CSV, MODEL, read_state
 
 DATASET, PAIRSET, RUN, RL_RUN, BUILD = "dataset", "pair set", "training run", "RL run", "build"
 """What :func:`kind` answers."""
@@ -42,10 +44,10 @@ DATASET, PAIRSET, RUN, RL_RUN, BUILD = "dataset", "pair set", "training run", "R
 def _rl_run(folder: Path) -> bool:
     """An ``sc2data rl train`` run: a checkpoint or curve of its own, or a ``config.json`` naming
     an action space (what a MEM run's never does)."""
-    if (folder / "model.zip").is_file() or (folder / "curve.csv").is_file():
+    if (folder / MODEL).is_file() or (folder / CURVE_CSV).is_file():
         return True
     try:
-        record = loads((folder / "config.json").read_bytes())
+        record = loads((folder / CONFIG).read_bytes())
     except (OSError, ValueError):  # formats.loads: any depth, one ValueError
         return False
     return isinstance(record, dict) and "action_space" in record
@@ -65,7 +67,7 @@ def kind(folder: Path) -> str:
         return PAIRSET
     if _rl_run(folder):
         return RL_RUN
-    if (folder / "state.json").is_file() or (folder / "config.json").is_file():
+    if (folder / STATE).is_file() or (folder / CONFIG).is_file():
         return RUN
     if (folder / ROLLOUT_DIR / "dataset.json").is_file() or \
             (folder / PAIRS_DIR / "pairset.json").is_file():
@@ -180,8 +182,8 @@ def _dataset_info(folder: Path) -> list[str]:
 
 
 def _pairset_info(folder: Path) -> list[str]:
+    from sc2data.ground.vocab import SPLITS
     from sc2data.pairs.loader import PairSet
-    from sc2data.vocab import SPLITS
 
     p = PairSet(folder)
     meta = p.meta
@@ -219,15 +221,7 @@ def _records(path: Path, shape: Shape, lines: bool = False) -> list[Any]:
     """A run's JSON file (or its JSON lines), checked to have ``shape``; [] if it is absent."""
     if not path.is_file():
         return []
-    try:
-        text = path.read_text()
-        records = [loads(t, finite=False) for t in text.splitlines()] if lines else \
-            [loads(text, finite=False)]
-    except (OSError, ValueError) as e:
-        raise Sc2DataError(f"{path} is unreadable ({e}); train the run again") from None
-    for r in records:
-        check_record(r, shape, path, "train the run again")
-    return records
+    return read_records(path, shape, "train the run again", lines=lines, finite=False)
 
 
 def _run_info(folder: Path) -> list[str]:
@@ -242,7 +236,7 @@ def _run_info(folder: Path) -> list[str]:
              "settings  " + "  ".join(f"{k}={config.get(k)}" for k in
                                       ("epochs", "batch_size", "lr", "l2", "seed",
                                        "categorical", "pool", "device_used"))]
-    rows = _records(folder / "metrics.jsonl", METRICS_ROW, lines=True)
+    rows = _records(folder / METRICS, METRICS_ROW, lines=True)
     if rows:
         best = min(rows, key=lambda r: r["val_loss"])
         lines += ["", f"{'epoch':>5} {'train loss':>10} {'train acc':>9} {'val loss':>9} "
@@ -250,7 +244,7 @@ def _run_info(folder: Path) -> list[str]:
         lines += [f"{r['epoch']:>5} {r['train_loss']:>10.4f} {r['train_acc']:>9.2%} "
                   f"{r['val_loss']:>9.4f} {r['val_acc']:>8.2%}" + ("  *" if r is best else "")
                   for r in rows]
-    for ev in _records(folder / "eval.json", EVAL_SHAPE):
+    for ev in _records(folder / EVAL, EVAL_SHAPE):
         acc = {s: v.get("accuracy") for s, v in ev.get("splits", {}).items()}
         lines += ["", "eval      " + "  ".join(f"{s} {a:.2%}" for s, a in acc.items()
                                                if isinstance(a, float))]
@@ -283,8 +277,8 @@ def _pairset_faults(folder: Path) -> tuple[list[str], list[str]]:
 
 
 def _pairset(folder: Path) -> list[str]:
+    from sc2data.ground.vocab import SPLITS
     from sc2data.pairs.loader import PairSet
-    from sc2data.vocab import SPLITS
 
     try:
         pairs = PairSet(folder)
@@ -310,7 +304,7 @@ def _run(folder: Path) -> tuple[list[str], list[str]]:
             return [f"{folder} has no state.json (written by an older sc2data, or interrupted "
                     f"before its first epoch)"], []
         check_run(folder, allow_unfinished=True, files=tuple(state["sha256"]))
-        from sc2data.model.reward import load_model
+        from sc2data.model.scorer import load_model
 
         load_model(folder, allow_unfinished=True)
     except Sc2DataError as e:
@@ -321,7 +315,7 @@ def _run(folder: Path) -> tuple[list[str], list[str]]:
 
 
 # -- RL runs -----------------------------------------------------------------------------------
-EVALS = ("eval.json", "eval-stochastic.json")
+EVALS = (EVAL, "eval-stochastic.json")
 """An RL run's evaluation reports (``eval-stochastic.json`` from runs evaluated before both
 modes went into ``eval.json``)."""
 SCORES: Shape = {"mean": float, "std": float}
@@ -337,17 +331,11 @@ def _rl_records(folder: Path) -> tuple[dict[str, Any], dict[str, Any] | None]:
     from sc2data.rl.train import STATE_SHAPE, read_config
 
     config = read_config(folder)
-    path = folder / "state.json"
+    path = folder / STATE
     if not path.is_file():
         return config, None
-    try:
-        state = loads(path.read_text())
-    except (OSError, ValueError) as e:
-        raise Sc2DataError(f"{path} is unreadable ({e}); delete {folder} and train it again, "
-                           f"or pick another --out") from None
-    check_record(state, STATE_SHAPE, path, f"delete {folder} and train it again, or pick "
-                                           f"another --out")
-    return config, state
+    return config, read_record(path, STATE_SHAPE, f"delete {folder} and train it again, or "
+                                                  f"pick another --out")
 
 
 def _rl_evals(folder: Path) -> list[tuple[str, dict[str, Any]]]:
@@ -355,13 +343,8 @@ def _rl_evals(folder: Path) -> list[tuple[str, dict[str, Any]]]:
     for name in EVALS:
         path = folder / name
         if path.is_file():
-            try:
-                record = loads(path.read_text())
-            except (OSError, ValueError) as e:
-                raise Sc2DataError(f"{path} is unreadable ({e}); rerun sc2data rl evaluate "
-                                   f"{folder}") from None
-            check_record(record, EVAL_REPORT, path, f"rerun sc2data rl evaluate {folder}")
-            out.append((name, record))
+            out.append((name, read_record(path, EVAL_REPORT,
+                                          f"rerun sc2data rl evaluate {folder}")))
     return out
 
 
@@ -370,7 +353,7 @@ def _rl_info(folder: Path) -> list[str]:
 
     config, state = _rl_records(folder)
     done = "no checkpoint yet (rerun the same sc2data rl train command to resume)" \
-        if state is None or not (folder / "model.zip").is_file() else \
+        if state is None or not (folder / MODEL).is_file() else \
         (f"{plural(state['timesteps'], 'decision')}, {plural(state['env_steps'], 'pysc2 step')}, "
          f"{plural(state['episodes'], 'episode')}, resumed {plural(state['resumes'], 'time')}")
     narration = config.get("narration") or "the shipped BuildMarines narration"
@@ -385,7 +368,7 @@ def _rl_info(folder: Path) -> list[str]:
     try:
         rows = read_curve(folder)
     except (OSError, ValueError, KeyError) as e:
-        raise Sc2DataError(f"{folder / 'curve.csv'} is unreadable ({e}); rerun the same "
+        raise Sc2DataError(f"{folder / CURVE_CSV} is unreadable ({e}); rerun the same "
                            f"sc2data rl train command to rewrite it") from None
     if rows:
         marines = np.array([r["marines"] for r in rows])
@@ -414,7 +397,7 @@ def _rl(folder: Path) -> tuple[list[str], list[str]]:
         return [str(e)], []
     faults: list[str] = []
     notes: list[str] = []
-    model = folder / "model.zip"
+    model = folder / MODEL
     if state is None or not model.is_file():
         notes.append("no checkpoint yet")
     else:
@@ -427,7 +410,6 @@ def _rl(folder: Path) -> tuple[list[str], list[str]]:
         except (OSError, zipfile.BadZipFile, EOFError) as e:
             faults.append(f"{model} is not a readable checkpoint ({type(e).__name__}: {e}); "
                           f"delete {folder} and train it again")
-    from sc2data.rl.runs import read_state
 
     try:  # the model and curve against the sha256 the last checkpoint recorded
         read_state(folder)
@@ -438,10 +420,10 @@ def _rl(folder: Path) -> tuple[list[str], list[str]]:
         rows = read_curve(folder)
         if state is not None and rows and max(r["timesteps"] for r in rows) > state["timesteps"] \
                 + config["envs"] * config["rollout"]:
-            faults.append(f"{folder / 'curve.csv'} runs past the {state['timesteps']} decisions "
+            faults.append(f"{folder / CURVE_CSV} runs past the {state['timesteps']} decisions "
                           f"state.json records; rerun the same sc2data rl train command")
     except (OSError, ValueError, KeyError) as e:
-        faults.append(f"{folder / 'curve.csv'} is unreadable ({e}); rerun the same sc2data rl "
+        faults.append(f"{folder / CURVE_CSV} is unreadable ({e}); rerun the same sc2data rl "
                       f"train command to rewrite it")
     faults += _faults_of(lambda: _rl_evals(folder))
     return faults, notes

@@ -20,8 +20,8 @@ from typing import Any, Literal
 import numpy as np
 
 from sc2data._pysc2 import actions, features
-from sc2data.formats import shape_fault
-from sc2data.vocab import MINIMAP_SIZE, SCREEN_SIZE
+from sc2data.ground.formats import shape_fault
+from sc2data.ground.vocab import MINIMAP_SIZE, SCREEN_SIZE
 
 SCHEMA_VERSION = 1
 """Bump when the stored layout changes; readers refuse shards of another version."""
@@ -344,7 +344,8 @@ class StackBatch:
                                     f"again with a layer set that keeps it") from None
 
     def vector(self, name: str, field: str) -> np.ndarray:
-        """``(B, 2)`` array of one field of a non-spatial vector, e.g. ``("player", "minerals")``."""
+        """``(B, 2)`` array of one field of a non-spatial vector, e.g.
+        ``("player", "minerals")``."""
         for v in self.schema.vectors:
             if v.name == name and field in v.fields and name in self.arrays:
                 return self.arrays[name][:, :, v.fields.index(field)]

@@ -31,7 +31,8 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 
     if sc2_available():
         return
-    skip = pytest.mark.skip(reason="StarCraft II binary or BuildMarines map not found (set SC2PATH)")
+    skip = pytest.mark.skip(
+        reason="StarCraft II binary or BuildMarines map not found (set SC2PATH)")
     for item in items:
         if "sc2" in item.keywords:
             item.add_marker(skip)

@@ -17,7 +17,7 @@ def help_of(args: list[str], capsys: pytest.CaptureFixture[str]) -> str:
 
 
 def test_commands_are_listed_in_pipeline_order(capsys: pytest.CaptureFixture[str]) -> None:
-    from sc2data.commands import PIPELINE
+    from sc2data.cli.commands import PIPELINE
 
     out = help_of([], capsys)
     listed = re.findall(r"^  ([a-z]+)\s", out.split("Commands:", 1)[1], re.M)
@@ -64,7 +64,7 @@ def test_defaults_are_shown_one_way(command: list[str], capsys: pytest.CaptureFi
 
 
 def test_render_and_rollout_default_to_the_same_agent(capsys: pytest.CaptureFixture[str]) -> None:
-    from sc2data.recipe import RolloutSpec
+    from sc2data.ground.recipe import RolloutSpec
 
     for command in (["rollout"], ["render"]):
         text = " ".join(help_of(command, capsys).split())

@@ -18,7 +18,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from sc2data.data.audit import verify
-from sc2data.files import sha256_file
+from sc2data.ground.files import sha256_file
 from tests.cli import exit_code
 from tests.conftest import leave_free
 

@@ -47,7 +47,8 @@ SUBSTITUTIONS: list[tuple[str, str]] = [
     ("for _ in range(100):", "for _ in range(20):"),
     ("--steps 20000", "--steps 64 --rollout 32 --batch-size 32 --episode-steps 40 "
                       "--checkpoint-every 64 --no-progress"),
-    ("sc2data rl evaluate runs/rl-narr --episodes 10", "sc2data rl evaluate runs/rl-narr --episodes 1"),
+    ("sc2data rl evaluate runs/rl-narr --episodes 10",
+     "sc2data rl evaluate runs/rl-narr --episodes 1"),
     # docs/mem-loop.md: 3 episodes a source, the tiny recipe's counts, a tiny MEM and agent.
     ("--episodes 20 --workers 2 --out loop/data/random",
      "--episodes 3 --workers 2 --out loop/data/random"),

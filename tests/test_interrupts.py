@@ -21,7 +21,7 @@ from pathlib import Path
 import pytest
 
 from sc2data.data.audit import verify
-from sc2data.files import FolderLock
+from sc2data.ground.files import FolderLock
 from tests.cli import exit_code
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -1,9 +1,10 @@
 """The package's layout holds: imports flow one way, from the shared ground up through the stages.
 
-Ground (root modules) ← game ← data ← labels ← pairs ← model, with scale-out and testing helpers
-beside the top and the CLI, the build driver and the package's lazy public API above all. A module
-may import its own level or lower ones, never a higher one — at module level or inside a function
-(only imports for type checking are exempt).
+Ground (``sc2data.ground``; and at the root ``rulebase``, ``schema``, ``_pysc2``, what rule plugins
+import) ← game ← data ← labels ← pairs ← model, with RL, scale-out and testing helpers beside the
+top; the command line (``sc2data.cli``), the build driver, the folder inspector and the package's
+lazy public API above all. A module may import its own level or lower ones, never a higher one —
+at module level or inside a function (only imports for type checking are exempt).
 """
 
 from __future__ import annotations
@@ -12,12 +13,13 @@ import ast
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "sc2data"
-LEVELS = {"game": 1, "data": 2, "labels": 3, "pairs": 4, "model": 5, "rl": 6, "scaleout": 6,
-          "testing": 6}
-TOP = {"cli", "commands", "cliopts", "build", "folders", "__init__"}
-"""Root modules that sit above every stage: the CLI and its option helpers, the build driver, the
-folder inspector (info/verify of any folder) and the lazy public API; everything else at the root
-is shared ground."""
+LEVELS = {"ground": 0, "game": 1, "data": 2, "labels": 3, "pairs": 4, "model": 5, "rl": 6,
+          "scaleout": 6, "testing": 6, "cli": 7}
+TOP = {"build", "folders", "__init__"}
+"""Root modules that sit above every stage: the build driver, the folder inspector (info/verify
+of any folder) and the lazy public API; any other root module is shared ground."""
+ROOT_MODULES = 6
+"""At most this many modules at the package root: the rest say what they are by their folder."""
 
 
 def level(module: str) -> int:
@@ -65,21 +67,26 @@ def test_imports_never_go_upward() -> None:
     assert not upward, "\n".join(upward)
 
 
+def test_the_root_holds_few_modules() -> None:
+    root = sorted(p.name for p in PACKAGE.glob("*.py"))
+    assert len(root) <= ROOT_MODULES, root
+
+
 def test_levels_name_every_subpackage() -> None:
     subpackages = {p.parent.name for p in PACKAGE.glob("*/__init__.py")}
     assert subpackages <= set(LEVELS), subpackages - set(LEVELS)
 
 
 def test_commands_start_without_torch_or_the_real_games_environment() -> None:
-    """Every ``sc2data`` process imports :mod:`sc2data.commands`: it must not pull in torch or
+    """Every ``sc2data`` process imports :mod:`sc2data.cli.commands`: it must not pull in torch or
     pysc2's ``sc2_env`` (whose renderer imports scikit-video and SciPy, 1.8 s of a 3.7 s start;
     BENCHMARKS.md, "Start-up and the test suite")."""
     import subprocess
     import sys
 
     heavy = ["torch", "pysc2.env.sc2_env", "scipy", "skvideo"]
-    code = ("import sys, sc2data.commands; "
+    code = ("import sys, sc2data.cli.commands; "
             f"print(' '.join(m for m in {heavy!r} if m in sys.modules))")
     done = subprocess.run([sys.executable, "-c", code], cwd=PACKAGE.parent, capture_output=True,
                           text=True, check=True)
-    assert done.stdout.strip() == "", f"sc2data.commands imports {done.stdout.strip()}"
+    assert done.stdout.strip() == "", f"sc2data.cli.commands imports {done.stdout.strip()}"

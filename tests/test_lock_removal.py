@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from sc2data.errors import Sc2DataError
-from sc2data.files import LOCK, FolderLock, writer
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import LOCK, FolderLock, writer
 
 
 def test_the_lock_file_goes_with_the_command(tmp_path: Path) -> None:

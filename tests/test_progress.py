@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from sc2data import progress
+from sc2data.ground import progress
 
 
 class _Log(io.StringIO):

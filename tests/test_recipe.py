@@ -9,7 +9,7 @@ from typing import Any
 
 import pytest
 
-from sc2data.recipe import Recipe, RecipeError, load, parse
+from sc2data.ground.recipe import Recipe, RecipeError, load, parse
 
 MANIFESTS = Path(__file__).resolve().parents[1] / "manifests"
 

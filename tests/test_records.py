@@ -142,7 +142,7 @@ READERS: dict[str, tuple[str, dict[str, tuple[str, list[str]]]]] = {
 def good(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """One of each folder, whole and valid: a labelled dataset, a pair set, a finished and an
     unfinished training run, an rl run, and a recipe that describes the dataset."""
-    from sc2data.files import sha256_file
+    from sc2data.ground.files import sha256_file
     from sc2data.labels.label import label_dataset
     from sc2data.rl.train import RLConfig
     from sc2data.rl.train import train as rl_train

@@ -6,7 +6,6 @@ line and a non-zero exit, nothing written, driven through the CLI as a user runs
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import subprocess
@@ -18,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from tests.cli import assert_one_line_error, run_cli
-from tests.mem_helpers import tiny_pairset, train_tiny
+from tests.mem_helpers import tiny_pairset
 from tests.synthetic_data import make_dataset
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -203,7 +202,7 @@ def test_verify_beside_a_running_train_reports_the_write_not_damage(
         [sys.executable, "-m", "sc2data.cli", "train", str(pairs), "--out", str(run),
          "--epochs", "4", "--threads", "1", "--vocab-size", "2000", "--no-progress"],
         cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    from sc2data.files import writer
+    from sc2data.ground.files import writer
 
     seen: set[str] = set()
     try:
@@ -234,7 +233,8 @@ def test_verify_and_info_of_a_dataset_being_written(
     """A dataset whose lock another process holds (as a rollout or label does)."""
     holder = subprocess.Popen(
         [sys.executable, "-c", "import sys, time; from pathlib import Path; "
-         "from sc2data.files import FolderLock; lock = FolderLock(Path(sys.argv[1]), 'label'); "
+         "from sc2data.ground.files import FolderLock; "
+         "lock = FolderLock(Path(sys.argv[1]), 'label'); "
          "print('held', flush=True); time.sleep(60)", str(data)],
         cwd=ROOT, stdout=subprocess.PIPE, text=True)
     try:

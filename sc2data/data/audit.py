@@ -34,8 +34,8 @@ from sc2data.data.shards import (
     chunk_table,
     unpack_available,
 )
-from sc2data.errors import Sc2DataError
-from sc2data.files import PARTIAL, sha256_file
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import PARTIAL, sha256_file
 from sc2data.schema import Block
 
 _BLOCK = 1024

@@ -21,7 +21,7 @@ import hdf5plugin
 import numpy as np
 import zstandard
 
-from sc2data.errors import Sc2DataError
+from sc2data.ground.errors import Sc2DataError
 
 ZSTD_FILTER = 32015
 """HDF5 filter id of Zstandard (registered by hdf5plugin)."""

@@ -32,9 +32,9 @@ import pyarrow.parquet as pq
 
 from sc2data.data.chunks import ChunkDecoder, Codec
 from sc2data.data.shards import Shard, unpack_available
-from sc2data.errors import Sc2DataError
-from sc2data.files import write_atomic
-from sc2data.formats import DATASET, loads
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import write_atomic
+from sc2data.ground.formats import DATASET, loads
 from sc2data.schema import Block, Index, Schema, SchemaError, StackBatch, positions
 
 MANIFEST = "dataset.json"
@@ -81,7 +81,8 @@ def read_manifest(folder: Path) -> dict[str, Any]:
     try:
         manifest = loads(path.read_text())
     except (OSError, ValueError) as e:
-        raise Sc2DataError(f"{path} is unreadable ({e}); delete the folder and roll out again")
+        raise Sc2DataError(f"{path} is unreadable ({e}); delete the folder and roll out "
+                           f"again") from e
     DATASET.check(manifest, path)
     return manifest
 
@@ -94,7 +95,7 @@ def read_index(folder: Path) -> pa.Table:
     try:
         table = pq.read_table(path)
     except (OSError, pa.ArrowException) as e:
-        raise Sc2DataError(f"{path} is unreadable ({e}); rerun the rollout to rewrite it")
+        raise Sc2DataError(f"{path} is unreadable ({e}); rerun the rollout to rewrite it") from e
     missing = set(INDEX_SCHEMA.names) - set(table.column_names)
     if missing:
         raise Sc2DataError(f"{path} lacks columns {sorted(missing)}; rerun the rollout")

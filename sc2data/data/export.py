@@ -50,16 +50,17 @@ import numpy as np
 
 from sc2data.data.dataset import Dataset
 from sc2data.data.shards import ARG_WIDTH
-from sc2data.errors import MissingDependencyError, Sc2DataError, reason
-from sc2data.files import PARTIAL, check_out, fsync_path, publish, writing
+from sc2data.ground.errors import MissingDependencyError, Sc2DataError, reason
+from sc2data.ground.files import PARTIAL, check_out, fsync_path, publish, writing
+from sc2data.ground.progress import bar
+from sc2data.ground.provenance import versions
+from sc2data.ground.vocab import EPISODE_STEPS
 from sc2data.schema import Schema
-from sc2data.vocab import EPISODE_STEPS
 
 FORMATS = ("npz", "minari", "hf")
 """What ``--to`` takes."""
 _READ_STEPS = 256
 """Stacks read at a time while an episode's frames are gathered."""
-
 
 @dataclass(frozen=True)
 class Episode:
@@ -94,7 +95,6 @@ class ExportSummary:
     seconds: float
     read_with: str
     """One line of Python that reads the export back."""
-
 
 def episode(ds: Dataset, episode_id: int, settings: dict[str, Any]) -> Episode:
     """Episode ``episode_id`` of ``ds``, its frames gathered from its stacks."""
@@ -140,7 +140,6 @@ def nested(flat: dict[str, Any]) -> dict[str, Any]:
 def metadata(ds: Dataset, to: str, name: str, episodes: int, steps: int) -> dict[str, Any]:
     """What every export records of its source (``metadata.json``, Minari's description, the
     Hugging Face dataset's ``info.description``)."""
-    from sc2data.provenance import versions
 
     return {"format": f"sc2data-export-{to}", "name": name, "source": str(ds.folder.resolve()),
             "episodes": episodes, "steps": steps, "settings": ds.settings,
@@ -178,7 +177,6 @@ def export(data: str | os.PathLike[str], to: str, out: str | os.PathLike[str], *
         stacks = int(ds.n_steps[:len(ids)].sum())
         tmp = out.with_name(f"{out.name}.{os.getpid()}{PARTIAL}")
         shutil.rmtree(tmp, ignore_errors=True)
-        from sc2data.progress import bar
 
         try:
             with writing(str(out), "free some space, then export again"):

@@ -2,8 +2,9 @@
 
 Shard ``i`` holds episodes ``[i·E, (i+1)·E)`` and episode ``e`` is seeded from ``(seed, e)``
 alone, so the data never depends on the number of workers. K worker processes each write whole
-shards as ``*.h5.partial`` and rename them when complete and fsynced (:mod:`sc2data.workers`);
-the parent shows one progress bar fed by the workers, and writes ``index.parquet`` last.
+shards as ``*.h5.partial`` and rename them when complete and fsynced
+(:mod:`sc2data.ground.workers`); the parent shows one progress bar fed by the workers, and writes
+``index.parquet`` last.
 Rerunning the same command after an interruption (Ctrl-C, ``kill -9``) deletes stale partials,
 keeps the complete shards and finishes the rest; other settings in the same folder are refused.
 
@@ -44,17 +45,18 @@ from sc2data.data.dataset import (
     write_manifest,
 )
 from sc2data.data.shards import Shard, ShardWriter
-from sc2data.errors import Sc2DataError, reason
-from sc2data.files import LOCK, PARTIAL, FolderLock, publish, sha256_file, writing
-from sc2data.formats import DATASET
 from sc2data.game import env as envs
-from sc2data.progress import Bar
-from sc2data.progress import bar as progress_bar
-from sc2data.provenance import versions
-from sc2data.recipe import MAX_EPISODES, Recipe, RolloutSpec
+from sc2data.ground.errors import Sc2DataError, reason
+from sc2data.ground.files import LOCK, PARTIAL, FolderLock, publish, sha256_file, writing
+from sc2data.ground.formats import DATASET
+from sc2data.ground.progress import Bar
+from sc2data.ground.progress import bar as progress_bar
+from sc2data.ground.provenance import versions
+from sc2data.ground.recipe import MAX_EPISODES, Recipe, RolloutSpec
+from sc2data.ground.resume import differences, refusal
+from sc2data.ground.vocab import BACKENDS, EPISODE_STEPS, LAYER_SETS, MAP_NAME
+from sc2data.ground.workers import run_parallel
 from sc2data.schema import Schema
-from sc2data.vocab import BACKENDS, EPISODE_STEPS, LAYER_SETS, MAP_NAME
-from sc2data.workers import run_parallel
 
 EnvFactory = Callable[[int], environment.Base]
 """``seed -> environment.Base`` (a pysc2 environment) for one episode."""
@@ -63,7 +65,8 @@ AgentFactory = Callable[[int], base_agent.BaseAgent]
 ShardRunner = Callable[["RolloutConfig", Path, list[int], EnvFactory, AgentFactory, Bar],
                       dict[int, list[dict[str, Any]]]]
 """Writes the shards ``todo`` elsewhere than in local worker processes (Ray tasks:
-``sc2data.scaleout.driver.RayShards``): ``runner(config, out, todo, env_factory, agent_factory, bar)``,
+``sc2data.scaleout.driver.RayShards``):
+``runner(config, out, todo, env_factory, agent_factory, bar)``,
 each shard through :func:`write_shard`, feeding the progress ``bar``; returns what
 :func:`write_shard` returned, by shard."""
 _SETTINGS_ORDER = ("env", "agent", "episodes", "seed", "layers", "episodes_per_shard", "max_steps",
@@ -118,8 +121,8 @@ class RolloutConfig(RolloutSpec):
 
     @classmethod
     def from_recipe(cls, recipe: Recipe, **overrides: Any) -> RolloutConfig:
-        """The rollout settings of a parsed recipe (:func:`sc2data.recipe.load`) of one source;
-        a recipe of several says in one line how to roll each out."""
+        """The rollout settings of a parsed recipe (:func:`sc2data.ground.recipe.load`) of one
+        source; a recipe of several says in one line how to roll each out."""
         if recipe.sources:
             each = "; ".join(f"sc2data rollout --agent {s.rollout.agent} --episodes "
                              f"{s.rollout.episodes} --seed {recipe.seed} --out DIR/{s.name}"
@@ -188,7 +191,8 @@ def resolve_agent(config: RolloutConfig) -> tuple[RolloutConfig, AgentFactory]:
     """``config`` with the sha256 of what its agent loads, and the agent's factory; one line for
     an unknown agent, or for a checkpoint other than the one the config records (a policy
     trained on since its data was rolled out: that data's agent no longer exists)."""
-    from sc2data.game.agents import AGENTS, resolve_agent as resolve
+    from sc2data.game.agents import AGENTS
+    from sc2data.game.agents import resolve_agent as resolve
 
     spec = resolve(config.agent)
     if config.agent_sha256 not in (None, spec.sha256):
@@ -201,8 +205,8 @@ def resolve_agent(config: RolloutConfig) -> tuple[RolloutConfig, AgentFactory]:
 
 
 # -- one shard ----------------------------------------------------------------------------------
-def play_episode(env: environment.Base, agent: base_agent.BaseAgent, writer: ShardWriter, max_steps: int | None,
-                 report: Callable[[int], None]) -> int:
+def play_episode(env: environment.Base, agent: base_agent.BaseAgent, writer: ShardWriter,
+                 max_steps: int | None, report: Callable[[int], None]) -> int:
     """Play one episode into ``writer``: frame 0, then (action, frame t+1, reward) per step."""
     timestep = env.reset()[0]
     agent.reset()
@@ -286,10 +290,6 @@ def manifest_for(config: RolloutConfig) -> dict[str, Any]:
             "versions": versions(), "map": MAP_NAME, "n_shards": config.n_shards}
 
 
-def _differences(a: dict[str, Any], b: dict[str, Any]) -> list[str]:
-    return sorted(k for k in set(a) | set(b) if a.get(k) != b.get(k))
-
-
 def folder_config(out: Path) -> RolloutConfig | None:
     """The settings of the dataset in ``out``, if it holds a readable one: what a rollout into it
     takes for the settings it is not given."""
@@ -311,11 +311,10 @@ def check_folder(config: RolloutConfig, out: Path) -> None:
                                f"sc2data reads and verifies but does not add to (it writes "
                                f"format {DATASET.version}); roll out into a new --out")
         settings = old.get("settings", {})
-        diff = [k for k in _differences(settings, config.settings()) if k != "episodes"
-                and not (k == "agent_sha256" and config.agent_sha256 is None)]  # not resolved yet
+        unresolved = ("agent_sha256",) if config.agent_sha256 is None else ()  # not yet known
+        diff = differences(settings, config.settings(), ignore=("episodes", *unresolved))
         if diff:
-            raise Sc2DataError(f"{out} holds a dataset made with other settings (differs in: "
-                               f"{', '.join(diff)}); use another --out or delete it")
+            raise refusal(out, "a dataset made", diff, "use another --out or delete it")
         if settings.get("episodes", 0) > config.episodes:
             raise Sc2DataError(f"{out} holds {settings['episodes']} episodes (or is growing to "
                                f"them), more than the {config.episodes} asked for; a dataset "

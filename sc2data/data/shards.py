@@ -22,7 +22,8 @@ Layout, all derived from a :class:`~sc2data.schema.Schema`::
 
 Stack ``t`` of an episode is frames ``frame_start + t`` and ``frame_start + t + 1`` with step
 ``step_start + t``. Every dataset is chunked, Zstd-compressed and fletcher32-checksummed
-(:mod:`sc2data.data.chunks`); the root's attributes describe the shard (schema, versions, settings…).
+(:mod:`sc2data.data.chunks`); the root's attributes describe the shard (schema, versions,
+settings…).
 Nothing written depends on the time or on the worker that wrote it, so a shard's bytes depend on
 its settings and seeds alone.
 """
@@ -46,9 +47,9 @@ from sc2data.data.chunks import (
     Codec,
     fast_path_ok,
 )
-from sc2data.errors import Sc2DataError
-from sc2data.files import fsync_path
-from sc2data.formats import SHARD, loads
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import fsync_path
+from sc2data.ground.formats import SHARD, loads
 from sc2data.schema import AVAILABLE, Schema, SchemaError
 
 ARG_WIDTH = max(sum(len(a.sizes) for a in f.args) for f in actions.FUNCTIONS)
@@ -432,7 +433,8 @@ class Shard:
         return self._index
 
     def frames(self, block: str) -> FrameSource:
-        """The chunk reader of frame dataset ``block`` (a :class:`~sc2data.schema.Block` name)."""
+        """The chunk reader of frame dataset ``block`` (a :class:`~sc2data.schema.Block`
+        name)."""
         if block not in self._sources:
             if self._fd is None:
                 self._fd = os.open(self.path, os.O_RDONLY)

@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from sc2data.data.dataset import Dataset as Rollout
-from sc2data.errors import MissingDependencyError, Sc2DataError
+from sc2data.ground.errors import MissingDependencyError, Sc2DataError
 
 try:
     from torch.utils.data import Dataset

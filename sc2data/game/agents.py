@@ -43,8 +43,8 @@ from sc2data._pysc2 import (  # first: it makes pysc2 importable on 3.11
 )
 
 from pysc2.agents import base_agent, random_agent  # isort: skip
-from sc2data.errors import Sc2DataError
 from sc2data.game.screen import ScreenView
+from sc2data.ground.errors import Sc2DataError
 
 _F = actions.FUNCTIONS
 _P = features.Player

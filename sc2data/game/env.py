@@ -8,8 +8,8 @@ from typing import Any, Literal
 
 from sc2data import _pysc2
 from sc2data._pysc2 import environment, interface_format
-from sc2data.errors import Sc2DataError
-from sc2data.vocab import BACKENDS, MAP_NAME, STEP_MUL
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.vocab import BACKENDS, MAP_NAME, STEP_MUL
 
 Backend = Literal["sim", "sc2"]
 

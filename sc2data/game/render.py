@@ -23,8 +23,8 @@ from typing import Any
 import numpy as np
 
 from sc2data._pysc2 import buffs, features, units
-from sc2data.errors import Sc2DataError, reason
-from sc2data.files import write_atomic
+from sc2data.ground.errors import Sc2DataError, reason
+from sc2data.ground.files import write_atomic
 from sc2data.schema import StackBatch
 
 COLUMNS = 7

@@ -13,10 +13,10 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from sc2data.errors import Sc2DataError
-from sc2data.formats import loads
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.formats import loads
 from sc2data.labels.registry import Registered, call, check_output
-from sc2data.labels.source import Batches, Unit
+from sc2data.labels.source import Batches, WorkUnit
 from sc2data.labels.store import FORMAT_VERSION, write_sums, write_table
 from sc2data.schema import Schema
 
@@ -104,7 +104,7 @@ def labels_fingerprint(dataset: Any, rules: Sequence[tuple[Any, ...]]) -> str:
     return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()
 
 
-def write_part(unit: Unit, rules: Sequence[Registered], keys: Sequence[str], batch_size: int,
+def write_part(unit: WorkUnit, rules: Sequence[Registered], keys: Sequence[str], batch_size: int,
                path: Path, on_batch: Callable[[int], None] | None = None) -> None:
     """Label one unit and write its part atomically at ``path``."""
     write_table(label_batches(unit.batches(batch_size, keys), rules, on_batch=on_batch), path)

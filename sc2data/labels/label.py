@@ -22,8 +22,12 @@ from typing import Any
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from sc2data.errors import Sc2DataError, reason
-from sc2data.files import FolderLock, write_atomic
+from sc2data.ground.errors import Sc2DataError, reason
+from sc2data.ground.files import FolderLock, write_atomic
+from sc2data.ground.progress import Bar
+from sc2data.ground.progress import bar as progress_bar
+from sc2data.ground.provenance import versions
+from sc2data.ground.resume import STATE, differences
 from sc2data.labels.apply import (
     check_requirements,
     fingerprint,
@@ -36,8 +40,8 @@ from sc2data.labels.apply import (
     required_keys,
     write_part,
 )
-from sc2data.labels.registry import Registered
-from sc2data.labels.source import Source, Unit, dataset_source
+from sc2data.labels.registry import Registered, load_registry
+from sc2data.labels.source import Source, WorkUnit, dataset_source
 from sc2data.labels.store import (
     FORMAT_VERSION,
     LABELS_FILE,
@@ -47,16 +51,14 @@ from sc2data.labels.store import (
     read_meta,
     write_labels,
 )
-from sc2data.progress import Bar
 
 PARTS_DIR = ".labels-parts"
 DEFAULT_BATCH = 256
 """Stacks per rule call: small enough that a building rule's temporaries stay in cache."""
 
-UnitRunner = Callable[[Sequence[tuple[Unit, Path]], Sequence[str], int, Bar], None]
+UnitRunner = Callable[[Sequence[tuple[WorkUnit, Path]], Sequence[str], int, Bar], None]
 """Labels units elsewhere than in this process (Ray tasks: ``sc2data.scaleout.driver.RayUnits``):
 ``runner([(unit, part path), …], keys, batch_size, bar)``, each through :func:`write_part`."""
-
 
 @dataclass(frozen=True)
 class LabelSummary:
@@ -127,12 +129,10 @@ def label(source: Source, rules: Sequence[Registered], out_dir: Path | str, *,
 
 def _run(source: Source, rules: Sequence[Registered], out: Path, fp: str, batch_size: int,
          progress: bool | None, run_units: UnitRunner | None = None) -> LabelSummary:
-    from sc2data.progress import bar as progress_bar
-    from sc2data.provenance import versions
 
     keys = required_keys(rules, source.schema)
     parts = out / PARTS_DIR
-    state = parts / "state.json"
+    state = parts / STATE
     if parts.is_dir() and parts_run(state) != fp:
         shutil.rmtree(parts)  # parts of other rules or another dataset: not resumable
     parts.mkdir(parents=True, exist_ok=True)
@@ -197,7 +197,7 @@ def _check_replacing(out: Path, rules: Sequence[Registered], overwrite: bool) ->
     except Sc2DataError:
         return  # damaged labels: relabelling them is the remedy
     new = [e.id for e in rules]
-    if sorted(old) != sorted(new):
+    if differences({"rules": sorted(old)}, {"rules": sorted(new)}):
         raise Sc2DataError(f"{out} already has labels of the rules {', '.join(old)}; this run "
                            f"labels with {', '.join(new)}. Pass --overwrite to replace them (a "
                            f"recipe naming a rule left out then cannot be paired)")
@@ -231,8 +231,6 @@ def label_dataset(data: Path | str, *, include: Sequence[str] | None = None,
                   overwrite: bool = False) -> LabelSummary:
     """``sc2data label``: load and select rules, open the dataset, label it into its folder,
     in ``workers`` processes (one shard at a time each) or through ``run_units``."""
-    from sc2data.labels.registry import load_registry
-
     if workers < 1:
         raise Sc2DataError(f"workers must be at least 1, not {workers}")
     rules = load_registry(rules_dir).select(include, exclude)

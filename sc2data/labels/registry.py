@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from sc2data.errors import Sc2DataError
+from sc2data.ground.errors import Sc2DataError
 from sc2data.rulebase import RULE_ID, Rule, describe, is_schema_key, synthetic_batch
 from sc2data.schema import MissingLayerError, StackBatch
 

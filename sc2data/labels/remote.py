@@ -10,24 +10,23 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from sc2data.errors import Sc2DataError
-from sc2data.files import PARTIAL
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import PARTIAL
+from sc2data.ground.progress import Bar
+from sc2data.ground.resume import STATE
+from sc2data.ground.workers import run_parallel
 from sc2data.labels.apply import fingerprint, parts_run, write_part
-from sc2data.labels.registry import Registered
-from sc2data.labels.source import Source, Unit, dataset_source
-from sc2data.progress import Bar
+from sc2data.labels.registry import Registered, load_registry
+from sc2data.labels.source import Source, WorkUnit, dataset_source
 
 Selection = tuple[tuple[str, ...] | None, tuple[str, ...], str | None]
 """``(include, exclude, rules_dir)``: how a process re-selects the run's rules."""
-
 
 @functools.lru_cache(maxsize=4)
 def _rules_and_source(data: str, selection: Selection, run: str
                       ) -> tuple[Sequence[Registered], Source]:
     """Loaded once per worker process and run (``run``: the run's fingerprint, so a process
     that outlives a run, as Ray's do, reloads for the next)."""
-    from sc2data.labels.registry import load_registry
-
     include, exclude, rules_dir = selection
     return load_registry(rules_dir).select(include, exclude), dataset_source(data)
 
@@ -39,7 +38,7 @@ def label_unit(data: str, selection: Selection, unit_key: str, part: str,
     ``selection`` = (include, exclude, rules_dir) and checked to be the run's (its parts
     folder's ``state.json``), then the unit is written with :func:`write_part`."""
     include, exclude, rules_dir = selection
-    run = str(parts_run(Path(part).parent / "state.json"))
+    run = str(parts_run(Path(part).parent / STATE))
     rules, source = _rules_and_source(data, (None if include is None else tuple(include),
                                              tuple(exclude), rules_dir), run)
     if fingerprint(rules, source.info) != run:
@@ -64,9 +63,8 @@ class LocalUnits:
     data: Path
     selection: Selection
 
-    def __call__(self, todo: Sequence[tuple[Unit, Path]], keys: Sequence[str], batch_size: int,
+    def __call__(self, todo: Sequence[tuple[WorkUnit, Path]], keys: Sequence[str], batch_size: int,
                  bar: Bar) -> None:
-        from sc2data.workers import run_parallel
 
         if not todo:
             return

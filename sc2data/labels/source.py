@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from sc2data.errors import Sc2DataError
-from sc2data.files import sha256_file
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import sha256_file
 from sc2data.schema import Schema, StackBatch
 
 READ_STACKS = 4096
@@ -26,7 +26,7 @@ Batches = Iterable[tuple[np.ndarray, np.ndarray, StackBatch]]
 
 
 @dataclass(frozen=True)
-class Unit:
+class WorkUnit:
     """One resumable piece of labelling work, typically one shard."""
 
     key: str
@@ -41,7 +41,7 @@ class Unit:
 class Source:
     """What is labelled: the units, the schema they share, and a description for provenance."""
 
-    units: Sequence[Unit]
+    units: Sequence[WorkUnit]
     schema: Schema
     info: dict[str, Any] = field(default_factory=dict)
     """JSON-able description of the dataset (path, fingerprint, …), stored with the labels."""
@@ -88,7 +88,7 @@ def dataset_source(path: Path | str) -> Source:
                     yield e[j:j + batch_size], s[j:j + batch_size], StackBatch(part, big.schema)
         return batches
 
-    units = [Unit(key=f"{name}:{info['sha256']}", stacks=sum(n for _, n in info["episodes"]),
+    units = [WorkUnit(key=f"{name}:{info['sha256']}", stacks=sum(n for _, n in info["episodes"]),
                   batches=reader(name, info["sha256"], sorted(info["episodes"])))
              for name, info in sorted(shards.items())]
     fingerprint = hashlib.sha256(json.dumps(

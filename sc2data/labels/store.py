@@ -24,9 +24,9 @@ from typing import Any
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from sc2data.errors import Sc2DataError
-from sc2data.files import atomic_file, sha256_file, write_atomic
-from sc2data.formats import loads
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import atomic_file, sha256_file, write_atomic
+from sc2data.ground.formats import loads
 
 LABELS_FILE = "labels.parquet"
 STACKS_FILE = "stack_labels.parquet"

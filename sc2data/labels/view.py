@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from sc2data.data.dataset import Dataset, open_dataset
-from sc2data.errors import Sc2DataError
 from sc2data.game.render import render_stack
+from sc2data.ground.errors import Sc2DataError
 
 DEFAULT_LIMIT = 8
 """Stacks drawn for ``--rule`` unless ``--limit`` says otherwise."""

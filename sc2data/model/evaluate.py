@@ -29,12 +29,13 @@ from typing import Any
 
 import numpy as np
 
-from sc2data.errors import Sc2DataError
-from sc2data.files import check_out, write_atomic
-from sc2data.model.reward import MEMScorer, load_model, pairwise
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import check_out, write_atomic
+from sc2data.ground.progress import bar as progress_bar
+from sc2data.ground.vocab import SPLITS
+from sc2data.model.runs import EVAL, TSNE
+from sc2data.model.scorer import MEMScorer, load_model, pairwise
 from sc2data.pairs.loader import PairSet
-from sc2data.progress import bar as progress_bar
-from sc2data.vocab import SPLITS
 
 PAPER = {"train": 0.9561, "val": 0.8235, "test": 0.8040}
 """The paper's accuracies (Waytowich et al. 2019, §4)."""
@@ -109,7 +110,7 @@ def parse_text_option(value: str, ids: Sequence[str]) -> tuple[str, str]:
     return phrase, cid
 
 
-def evaluate(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None,
+def evaluate(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None, *,
              device: str = "auto", texts: Sequence[str] = (),
              allow_unfinished: bool = False, other_data: bool = False,
              progress: bool | None = None) -> dict[str, Any]:
@@ -119,7 +120,7 @@ def evaluate(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = 
     the one the run was trained on (another fingerprint: re-split or re-drawn, so its test split may
     hold training states) is refused unless ``other_data``; its report then goes to
     ``RUN/eval-<fingerprint>.json`` and the run's own ``eval.json`` is kept. ``progress``: a
-    bar per split embedded (see :func:`sc2data.progress.bar`).
+    bar per split embedded (see :func:`sc2data.ground.progress.bar`).
     """
     run = Path(run)
     scorer = load_model(run, device, allow_unfinished=allow_unfinished)
@@ -167,7 +168,7 @@ def evaluate(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = 
 
 def report_path(run: Path, fingerprint: str, own: bool) -> Path:
     """``RUN/eval.json`` for the run's own pair set, ``RUN/eval-<fingerprint[:12]>.json`` else."""
-    return run / ("eval.json" if own else f"eval-{fingerprint[:12]}.json")
+    return run / (EVAL if own else f"eval-{fingerprint[:12]}.json")
 
 
 def _pairset(scorer: MEMScorer, data: str | os.PathLike[str] | None) -> PairSet:
@@ -324,18 +325,13 @@ def separation_note(states: np.ndarray, labels: np.ndarray, commands: np.ndarray
             f"nearest their own command (chance {1 / len(ids):.0%})")
 
 
-def tsne(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None,
+def tsne(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None, *,
          out: str | os.PathLike[str] | None = None, states: int = 2000, seed: int = 0,
          texts: Sequence[str] = (), device: str = "auto", allow_unfinished: bool = False,
          progress: bool | None = None) -> Path:
     """Plot test-state and command embeddings in one t-SNE map (the paper's Fig. 3) as a PNG."""
     if out is not None:
         check_out(Path(out))
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     run = Path(run)
     scorer = load_model(run, device, allow_unfinished=allow_unfinished)
     pairset = _pairset(scorer, data)
@@ -348,17 +344,47 @@ def tsne(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None
     rows, labels = rows[pick], labels[pick]
     emb = _embed_split(scorer, pairset, split, progress)[rows]
     ids = [str(c["id"]) for c in pairset.commands]
+    marks = _marks(pairset, ids, texts)
+    text_e = scorer.embed_texts([m[0] for m in marks])
+    warning = separation_note(emb, labels, text_e[:len(ids)], ids)
+    xy = _tsne(np.concatenate([emb, text_e]), seed)
+    title = (f"MEM embedding space, t-SNE of {len(emb)} {split} states and "
+             f"{len(marks)} commands ({run.name})")
+    png = _draw_tsne(xy[:len(emb)], labels, xy[len(emb):], marks, canon=pairset.texts(),
+                     ids=ids, title=title, warning=warning)
+    path = Path(out) if out else run / TSNE
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_atomic(path, png)
+    except OSError as e:
+        raise Sc2DataError(f"cannot write {path}: {e.strerror or e}; choose another --out") \
+            from None
+    return path
+
+
+def _marks(pairset: PairSet, ids: list[str], texts: Sequence[str]) -> list[tuple[str, str, str]]:
+    """(text, command id, kind) of every command phrasing drawn: canonical, training phrasings,
+    held-out paraphrases, and ``--text`` phrases ("PHRASE=command_id" is coloured as its
+    command; a bare phrase in black)."""
     canon = pairset.texts()
     marks = [(canon[i], i, "canonical") for i in ids]
     marks += [(p, i, "training phrasing") for i, ps in pairset.train_paraphrases().items()
               for p in ps]
     marks += [(p, i, "held-out paraphrase") for i, ps in pairset.paraphrases().items() for p in ps]
-    for t in texts:  # "PHRASE=command_id" is coloured as its command; a bare phrase in black
+    for t in texts:
         marks.append((*parse_text_option(t, ids), "extra") if "=" in t else (t, "", "extra"))
-    text_e = scorer.embed_texts([m[0] for m in marks])
-    warning = separation_note(emb, labels, text_e[:len(ids)], ids)
-    xy = _tsne(np.concatenate([emb, text_e]), seed)
-    s_xy, t_xy = xy[:len(emb)], xy[len(emb):]
+    return marks
+
+
+def _draw_tsne(s_xy: np.ndarray, labels: np.ndarray, t_xy: np.ndarray,
+               marks: list[tuple[str, str, str]], *, canon: dict[str, str], ids: list[str],
+               title: str, warning: str | None) -> bytes:
+    """The t-SNE map as PNG bytes: states coloured by command (null in grey), each phrasing a
+    labelled mark."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(11, 9))
     colours = {cid: plt.get_cmap("tab10")(k) for k, cid in enumerate(ids)}
@@ -384,30 +410,22 @@ def tsne(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = None
             bbox=dict(boxstyle="round,pad=0.2", fc="white", alpha=0.8, lw=0)))
     for kind, (marker, _) in style.items():
         if any(m[2] == kind for m in marks):
-            ax.scatter([], [], marker=marker, color="white", edgecolors="black",
-                       label={"canonical": "canonical command", "extra": "--text phrase"}.get(kind, kind))
+            name = {"canonical": "canonical command", "extra": "--text phrase"}.get(kind, kind)
+            ax.scatter([], [], marker=marker, color="white", edgecolors="black", label=name)
     ax.legend(loc="best", fontsize=8, markerscale=1.5)
-    ax.set_title(f"MEM embedding space, t-SNE of {len(emb)} {split} states and "
-                 f"{len(marks)} commands ({run.name})")
+    ax.set_title(title)
     if warning:
         ax.text(0.5, 0.98, warning, transform=ax.transAxes, ha="center", va="top", fontsize=11,
                 color="darkred", zorder=7,
                 bbox={"boxstyle": "round", "facecolor": "white", "edgecolor": "darkred"})
     ax.set_xticks([])
     ax.set_yticks([])
-    path = Path(out) if out else run / "tsne.png"
     fig.tight_layout()
     _declutter(fig, notes)
     png = io.BytesIO()
     fig.savefig(png, format="png", dpi=130)
     plt.close(fig)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        write_atomic(path, png.getvalue())
-    except OSError as e:
-        raise Sc2DataError(f"cannot write {path}: {e.strerror or e}; choose another --out") \
-            from None
-    return path
+    return png.getvalue()
 
 
 def _declutter(fig: Any, notes: list[Any]) -> None:

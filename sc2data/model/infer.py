@@ -1,4 +1,5 @@
-"""The state encoder at inference on a CPU: the same function as ``StateEncoder``, on fewer channels.
+"""The state encoder at inference on a CPU: the same function as ``StateEncoder``, on fewer
+channels.
 
 The scorer (a reward an RL loop calls every env step) spends its time building the one-hot image
 and in the first convolution, which sees 92 screen and 66 minimap channels of which a
@@ -35,7 +36,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from sc2data.errors import Sc2DataError
+from sc2data.ground.errors import Sc2DataError
 from sc2data.model.mem import EmbeddedConv, SpatialInput, StateEncoder
 
 
@@ -166,7 +167,8 @@ class _Group:
         x = torch.from_numpy(image).view(b, 2 * n, h, w)
         return self._conv(x, jobs, fold, fold_value, with_bias=bias)
 
-    def _conv(self, x: torch.Tensor, jobs: list[tuple[np.ndarray, int | None, int, int, float, int]],
+    def _conv(self, x: torch.Tensor,
+              jobs: list[tuple[np.ndarray, int | None, int, int, float, int]],
               fold: list[int], fold_value: list[float], with_bias: bool = True) -> torch.Tensor:
         """The first convolution on the kept channels, constants in the bias (``with_bias``:
         the layer's own bias too)."""

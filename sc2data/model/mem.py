@@ -42,9 +42,9 @@ from typing import Any, Literal
 
 import numpy as np
 
-from sc2data.errors import MissingDependencyError, Sc2DataError
-from sc2data.files import write_atomic
-from sc2data.formats import CHECKPOINT
+from sc2data.ground.errors import MissingDependencyError, Sc2DataError
+from sc2data.ground.files import write_atomic
+from sc2data.ground.formats import CHECKPOINT
 from sc2data.schema import Schema, SchemaError, StackBatch
 
 try:

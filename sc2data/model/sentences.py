@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from sc2data.errors import MissingDependencyError, Sc2DataError
+from sc2data.ground.errors import MissingDependencyError, Sc2DataError
 
 
 @dataclass(frozen=True)

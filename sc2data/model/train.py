@@ -37,8 +37,8 @@ from typing import Any
 
 import numpy as np
 
-from sc2data.errors import MissingDependencyError, Sc2DataError, reason
-from sc2data.files import (
+from sc2data.ground.errors import MissingDependencyError, Sc2DataError, reason
+from sc2data.ground.files import (
     LOCK,
     PARTIAL,
     FolderLock,
@@ -49,19 +49,14 @@ from sc2data.files import (
     writer,
     writing,
 )
-from sc2data.formats import Shape, check_record, loads
+from sc2data.ground.formats import Shape
+from sc2data.ground.progress import bar as progress_bar
+from sc2data.ground.provenance import versions
+from sc2data.ground.resume import differences, read_record, refusal
+from sc2data.model.runs import BEST, CHECKPOINTS, CONFIG, LAST, METRICS, NEXT, RUN_FILES, STATE
 from sc2data.model.words import load_word_vectors
 from sc2data.pairs.loader import PairLoader, PairSet
-from sc2data.provenance import versions
-from sc2data.progress import bar as progress_bar
 
-CHECKPOINTS = ("best.pt", "last.pt")
-NEXT = ".next"
-"""An epoch writes its checkpoints as ``best.pt.next`` / ``last.pt.next``, records them in
-``state.json``, then renames them: a run cut anywhere in between resumes (see ``_settle``)."""
-RUN_FILES = ("config.json", "metrics.jsonl", *CHECKPOINTS, *(c + NEXT for c in CHECKPOINTS),
-             "state.json", "eval.json", "tsne.png")
-STATE_FILE = "state.json"
 RESUME_IGNORES = ("out", "overwrite", "progress", "name")
 """Config fields that may differ between an interrupted run and the rerun that resumes it."""
 
@@ -141,7 +136,7 @@ class TrainConfig:
 def train(cfg: TrainConfig) -> Path:
     """Train, keep the best-validation checkpoint, and return the run folder."""
     try:
-        import torch
+        import torch  # noqa: F401  (present: the trainer's tensors)
         from tqdm import tqdm
     except ImportError:
         raise MissingDependencyError("torch", "train", "sc2data train") from None
@@ -150,42 +145,12 @@ def train(cfg: TrainConfig) -> Path:
     cfg.validate()
     data = PairSet(cfg.data)
     cfg.name = f"{data.recipe_name}__{cfg.seed}__{time.strftime('%Y%m%d-%H%M%S')}"
-
-    # --- seeding and device, in one place
-    random.seed(cfg.seed)
-    np.random.seed(cfg.seed)
-    torch.manual_seed(cfg.seed)
-    device = M.resolve_device(cfg.device)
-    if device.type == "cpu":  # leave a core to the loader's thread (measured: BENCHMARKS.md)
-        torch.set_num_threads(cfg.threads or max(1, len(os.sched_getaffinity(0)) - 1))
-    cuda = device.type == "cuda"
-
-    # --- texts: every text of the pair set checked, then the pairs' texts encoded once
+    device = _seed_and_device(cfg)
     splits = {s: data.pairs(s) for s in ("train", "val")}
     if len(splits["train"]) == 0:
         raise Sc2DataError(f"{data.path} has no training pairs; rebuild it with more states")
-    texts = sorted({str(t) for p in splits.values() for t in p.command})
-    known = sorted(set(texts) | set(data.texts().values())
-                   | {p for ps in data.paraphrases().values() for p in ps}
-                   | {p for ps in data.train_paraphrases().values() for p in ps})
-    words: Any = None
-    sentences: Any = None
-    if cfg.text_encoder == "lstm":
-        words = load_word_vectors(cfg.vectors, cfg.vocab_size, extra_words=known)
-        words.encode(known)  # a text with no known word fails here, naming it
-        text_inputs, text_dim = words.inputs(texts), 0
-        text_source, text_digest = words.source, words.digest()
-    else:
-        from sc2data.model.sentences import SentenceVectors
-
-        sentences = SentenceVectors(cfg.text_encoder)
-        sentences.embed(known)
-        text_inputs, text_dim = sentences.inputs(texts), sentences.dim
-        text_source, text_digest = sentences.source, sentences.digest(known)
-    text_of = {t: i for i, t in enumerate(texts)}
-    text_t = M.text_tensors(text_inputs, device)
-
-    # --- model: input channels and categorical tables from the data's schema
+    texts = _Texts.encode(cfg, data, splits)
+    text_t = M.text_tensors(texts.inputs, device)
     train_split, val_split = data.packed("train"), data.packed("val")
     run = _make_run_folder(Path(cfg.out or Path("runs") / cfg.name))
     with FolderLock(run, "train"), writing(f"the run {run}", "free some space, then rerun the "
@@ -198,139 +163,290 @@ def train(cfg: TrainConfig) -> Path:
             if cfg.progress is not False:
                 tqdm.write(f"{run} is a finished run of these settings; nothing to do")
             return run
+        trainer = _Trainer.build(cfg, data, texts, device=device, text_t=text_t,
+                                 train_split=train_split)
+        loaders = (trainer.loader(splits["train"], train_split, shuffle=True),
+                   trainer.loader(splits["val"], val_split, shuffle=False))
+        config = _run_config(cfg, trainer, data, texts=texts, run=run)
+        if resumed is None:
+            write_atomic(run / CONFIG, json.dumps(config, indent=2).encode())
+        config = json.loads(json.dumps(config))  # plain types only: best.pt loads with weights_only
+        meta = _checkpoint_meta(config, data, texts)
+        best, first = trainer.resume(run) if resumed is not None else (float("inf"), 1)
+        with open(run / METRICS, "a") as log:
+            for epoch in range(first, cfg.epochs + 1):
+                best = _epoch(trainer, loaders, epoch, best=best, run=run, meta=meta, log=log)
+    for s in (train_split, val_split):
+        s.close()
+    return run
+
+
+def _seed_and_device(cfg: TrainConfig) -> Any:
+    """Seed Python, numpy and torch; the torch device, and its threads on a CPU."""
+    import torch
+
+    from sc2data.model import mem as M
+
+    random.seed(cfg.seed)
+    np.random.seed(cfg.seed)
+    torch.manual_seed(cfg.seed)
+    device = M.resolve_device(cfg.device)
+    if device.type == "cpu":  # leave a core to the loader's thread (measured: BENCHMARKS.md)
+        torch.set_num_threads(cfg.threads or max(1, len(os.sched_getaffinity(0)) - 1))
+    return device
+
+
+@dataclass
+class _Texts:
+    """Every text of the pair set checked, and the pairs' texts encoded once."""
+
+    texts: list[str]
+    """The pairs' distinct texts, in the order the model's text table holds them."""
+    known: list[str]
+    """Every text the pair set names: pairs', canonical, training phrasings, paraphrases."""
+    words: Any
+    """The word vectors (``lstm``), else None."""
+    sentences: Any
+    """The sentence encoder (``minilm``), else None."""
+    inputs: Any
+    dim: int
+    source: str
+    digest: str
+
+    @classmethod
+    def encode(cls, cfg: TrainConfig, data: PairSet, splits: dict[str, Any]) -> _Texts:
+        texts = sorted({str(t) for p in splits.values() for t in p.command})
+        known = sorted(set(texts) | set(data.texts().values())
+                       | {p for ps in data.paraphrases().values() for p in ps}
+                       | {p for ps in data.train_paraphrases().values() for p in ps})
+        if cfg.text_encoder == "lstm":
+            words = load_word_vectors(cfg.vectors, cfg.vocab_size, extra_words=known)
+            words.encode(known)  # a text with no known word fails here, naming it
+            return cls(texts, known, words, None, words.inputs(texts), 0, words.source,
+                       words.digest())
+        from sc2data.model.sentences import SentenceVectors
+
+        sentences = SentenceVectors(cfg.text_encoder)
+        sentences.embed(known)
+        return cls(texts, known, None, sentences, sentences.inputs(texts), sentences.dim,
+                   sentences.source, sentences.digest(known))
+
+
+@dataclass
+class _Trainer:
+    """The model, its optimiser and where they run: one batch at a time (:meth:`step`)."""
+
+    cfg: TrainConfig
+    model: Any
+    mcfg: Any
+    optimizer: Any
+    device: Any
+    text_t: Any
+    text_of: dict[str, int]
+
+    @classmethod
+    def build(cls, cfg: TrainConfig, data: PairSet, texts: _Texts, *, device: Any, text_t: Any,
+              train_split: Any) -> _Trainer:
+        """The model (input channels and categorical tables from the data's schema) and Adam."""
+        import torch
+
+        from sc2data.model import mem as M
+
         mcfg = M.ModelConfig(categorical=cfg.categorical, pool=cfg.pool,  # type: ignore[arg-type]
                              conv=M.conv_for(cfg.pool, cfg.conv_channels),
                              text_encoder=cfg.text_encoder)  # type: ignore[arg-type]
         big = [l.key for l in data.schema.layers if l.categorical and l.scale > mcfg.max_table]
         tables = M.value_tables(data.schema, (b for _, b in train_split.blocks(keys=big)) if big
                                 else [], mcfg.max_table)
-        model = M.MEM(data.schema, tables, words.vectors if words else None, mcfg,
-                      text_dim=text_dim).to(device)
-        keys = model.state.keys()
+        model = M.MEM(data.schema, tables, texts.words.vectors if texts.words else None, mcfg,
+                      text_dim=texts.dim).to(device)
         optimizer = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=cfg.lr)
+        return cls(cfg, model, mcfg, optimizer, device, text_t,
+                   {t: i for i, t in enumerate(texts.texts)})
 
-        # in the loader's thread: a CPU gets inputs packed in numpy, a GPU raw pinned stacks
-        transform = None if cuda else model.state.pack
-        collate = lambda rows: M.to_tensors(rows, pin=cuda)  # noqa: E731
+    @property
+    def cuda(self) -> bool:
+        return bool(self.device.type == "cuda")
 
-        def loader(split: str, packed: Any, shuffle: bool) -> PairLoader:
-            p = splits[split]
-            return PairLoader(packed, p.state, np.array([text_of[t] for t in p.command], np.int64),
-                              p.target, cfg.batch_size, keys, shuffle, cfg.seed, cfg.window,
-                              transform=transform, collate=collate)
+    def loader(self, pairs: Any, packed: Any, *, shuffle: bool) -> PairLoader:
+        """A split's pairs in batches; in the loader's thread a CPU gets inputs packed in numpy,
+        a GPU raw pinned stacks."""
+        from sc2data.model import mem as M
 
-        train_loader = loader("train", train_split, True)
-        val_loader = loader("val", val_split, False)
+        cuda = self.cuda
+        return PairLoader(packed, pairs.state,
+                          np.array([self.text_of[t] for t in pairs.command], np.int64),
+                          pairs.target, batch_size=self.cfg.batch_size,
+                          keys=self.model.state.keys(), shuffle=shuffle, seed=self.cfg.seed,
+                          window=self.cfg.window, transform=None if cuda else self.model.state.pack,
+                          collate=lambda rows: M.to_tensors(rows, pin=cuda))
 
-        config = {**asdict(cfg), "model": asdict(mcfg), "run": str(run),
-                  "data_fingerprint": data.fingerprint, "recipe_name": data.recipe_name,
-                  "text_source": text_source, "text_digest": text_digest,
-                  **({"vectors_source": words.source, "vectors_digest": text_digest,
-                      "vocab": len(words.words), "word_dim": words.dim} if words else
-                     {"text_dim": text_dim}),
-                  "device_used": str(device),
-                  "threads_used": torch.get_num_threads(),
-                  "torch": str(torch.__version__), "machine": platform.platform(),
-                  "parameters": sum(p.numel() for p in model.parameters() if p.requires_grad),
-                  "versions": versions()}
-        if resumed is None:
-            write_atomic(run / "config.json", json.dumps(config, indent=2).encode())
-        config = json.loads(json.dumps(config))  # plain types only: best.pt loads with weights_only
+    def step(self, batch: Any, train: bool) -> Any:
+        """One batch; returns (Σ squared error, correct, pairs) as a tensor on the device, so
+        that a GPU is synchronised only when the progress bar or the epoch reads it."""
+        import torch
 
-        def step(batch: Any, train: bool) -> torch.Tensor:
-            """One batch; returns (Σ squared error, correct, pairs) as a tensor on the device, so
-            that a GPU is synchronised only when the progress bar or the epoch reads it."""
-            x = M.to_device(batch.arrays, device)
-            if cuda:  # packing runs on the GPU
-                x = model.state.pack_torch(x)
-            target = torch.from_numpy(batch.target).to(device, non_blocking=cuda)
-            which = torch.from_numpy(batch.text).to(device, non_blocking=cuda)
-            with torch.autocast(device.type, dtype=torch.bfloat16, enabled=cfg.amp and cuda):
-                d = model(x, text_t, which).float()
-            mse = ((d - target) ** 2).mean()
-            if train:
-                loss = mse + cfg.l2 * model.l2() if cfg.l2 else mse
-                optimizer.zero_grad(set_to_none=True)
-                loss.backward()
-                optimizer.step()
-            correct = ((d < M.THRESHOLD) == (target < 0.5)).sum()
-            return torch.stack([mse.detach() * len(batch), correct.float(),
-                                torch.tensor(float(len(batch)), device=device)])
+        from sc2data.model import mem as M
 
-        sentence_state = None
-        if sentences is not None:  # the frozen embeddings of every known text ride in the checkpoint
-            sentence_state = sentences.state(known)
-            sentence_state["embeddings"] = torch.from_numpy(sentence_state["embeddings"])
-        # --- resuming: the model, optimiser and generators as the last finished epoch left them
-        best, first = float("inf"), 1
-        if resumed is not None:
-            last = torch.load(run / "last.pt", map_location="cpu", weights_only=False)
-            model.load_state_dict(last["model"])
-            optimizer.load_state_dict(last["optimizer"])
-            torch.set_rng_state(last["torch_rng"])
-            np.random.set_state(last["numpy_rng"])
-            random.setstate(last["python_rng"])
-            best, first = last["best"], last["epoch"] + 1
-            _keep_rows(run / "metrics.jsonl", last["epoch"])
-        with open(run / "metrics.jsonl", "a") as log:
-            for epoch in range(first, cfg.epochs + 1):
-                model.train()
-                t0, c0, acc = time.perf_counter(), time.process_time(), torch.zeros(3, device=device)
-                with progress_bar(len(train_loader), desc=f"epoch {epoch}/{cfg.epochs}",
-                                  unit="batch", show=cfg.progress, leave=False) as bar:
-                    for i, batch in enumerate(train_loader.epoch(epoch)):
-                        acc += step(batch, True)
-                        bar.update(1)
-                        if cfg.progress is not False and i % 20 == 0:
-                            e, c, n = acc.tolist()
-                            bar.set_postfix(loss=f"{e / n:.4f}", acc=f"{c / n:.3f}",
-                                            pairs_s=f"{n / (time.perf_counter() - t0):.0f}",
-                                            refresh=False)  # drawn when the bar next is
-                sums = acc.tolist()
-                seconds, cpu_seconds = time.perf_counter() - t0, time.process_time() - c0
-                model.eval()
-                vacc, v0 = torch.zeros(3, device=device), time.perf_counter()
-                with torch.no_grad():
-                    for batch in val_loader.epoch(0):
-                        vacc += step(batch, False)
-                vsums = vacc.tolist()
-                val_seconds = time.perf_counter() - v0
-                with torch.no_grad():
-                    l2 = float(model.l2())
-                val_loss = float(vsums[0] / vsums[2]) if vsums[2] else float("nan")
-                row = {"epoch": epoch, "train_loss": float(sums[0] / sums[2]),
-                       "train_acc": float(sums[1] / sums[2]), "l2": l2, "val_loss": val_loss,
-                       "val_acc": float(vsums[1] / vsums[2]) if vsums[2] else float("nan"),
-                       "pairs_per_s": float(sums[2] / seconds), "seconds": seconds,
-                       "cpu_seconds": cpu_seconds,
-                       "val_seconds": val_seconds}
-                # without validation pairs, the last epoch is kept
-                row["best"] = bool(val_loss < best) if vsums[2] else True
-                if row["best"]:
-                    best = val_loss if vsums[2] else best
-                    M.save_checkpoint(run / f"best.pt{NEXT}", model, words.words if words else (), {
-                        "config": config, "epoch": epoch, "val_loss": val_loss,
-                        "vectors_source": text_source, "vectors_digest": text_digest,
-                        **({"sentences": sentence_state} if sentences else {}),
-                        "data_fingerprint": data.fingerprint, "commands": data.commands})
-                log.write(json.dumps(row) + "\n")
-                log.flush()
-                os.fsync(log.fileno())
-                M.save_atomic({"epoch": epoch, "best": best, "model": model.state_dict(),
-                               "optimizer": optimizer.state_dict(),
-                               "torch_rng": torch.get_rng_state(),
-                               "numpy_rng": np.random.get_state(),
-                               "python_rng": random.getstate()}, run / f"last.pt{NEXT}")
-                _write_state(run, epoch, cfg.epochs)
-                _settle(run, read_state(run))
-                if cfg.progress is not False:
-                    tqdm.write(f"epoch {epoch:>3}  train loss {row['train_loss']:.4f} acc "
-                               f"{row['train_acc']:.2%}  val loss {val_loss:.4f} acc "
-                               f"{row['val_acc']:.2%}  {row['pairs_per_s']:.0f} pairs/s"
-                               + ("  *" if row["best"] else ""))
-    for s in (train_split, val_split):
-        s.close()
-    return run
+        cfg, model, device, cuda = self.cfg, self.model, self.device, self.cuda
+        x = M.to_device(batch.arrays, device)
+        if cuda:  # packing runs on the GPU
+            x = model.state.pack_torch(x)
+        target = torch.from_numpy(batch.target).to(device, non_blocking=cuda)
+        which = torch.from_numpy(batch.text).to(device, non_blocking=cuda)
+        with torch.autocast(device.type, dtype=torch.bfloat16, enabled=cfg.amp and cuda):
+            d = model(x, self.text_t, which).float()
+        mse = ((d - target) ** 2).mean()
+        if train:
+            loss = mse + cfg.l2 * model.l2() if cfg.l2 else mse
+            self.optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            self.optimizer.step()
+        correct = ((d < M.THRESHOLD) == (target < 0.5)).sum()
+        return torch.stack([mse.detach() * len(batch), correct.float(),
+                            torch.tensor(float(len(batch)), device=device)])
+
+    def resume(self, run: Path) -> tuple[float, int]:
+        """The model, optimiser and generators as the last finished epoch left them; the best
+        validation loss so far and the epoch to train next."""
+        import torch
+
+        last = torch.load(run / LAST, map_location="cpu", weights_only=False)
+        self.model.load_state_dict(last["model"])
+        self.optimizer.load_state_dict(last["optimizer"])
+        torch.set_rng_state(last["torch_rng"])
+        np.random.set_state(last["numpy_rng"])
+        random.setstate(last["python_rng"])
+        _keep_rows(run / METRICS, last["epoch"])
+        return last["best"], last["epoch"] + 1
+
+    def train_epoch(self, loader: PairLoader, epoch: int) -> tuple[list[float], float, float]:
+        """One pass over the training pairs: (Σ error, correct, pairs), seconds, CPU seconds."""
+        import torch
+
+        self.model.train()
+        t0, c0 = time.perf_counter(), time.process_time()
+        acc = torch.zeros(3, device=self.device)
+        with progress_bar(len(loader), desc=f"epoch {epoch}/{self.cfg.epochs}", unit="batch",
+                          show=self.cfg.progress, leave=False) as bar:
+            for i, batch in enumerate(loader.epoch(epoch)):
+                acc += self.step(batch, True)
+                bar.update(1)
+                if self.cfg.progress is not False and i % 20 == 0:
+                    e, c, n = acc.tolist()
+                    bar.set_postfix(loss=f"{e / n:.4f}", acc=f"{c / n:.3f}",
+                                    pairs_s=f"{n / (time.perf_counter() - t0):.0f}",
+                                    refresh=False)  # drawn when the bar next is
+        sums = acc.tolist()
+        return sums, time.perf_counter() - t0, time.process_time() - c0
+
+    def validate(self, loader: PairLoader) -> tuple[list[float], float, float]:
+        """(Σ error, correct, pairs) over the validation pairs, seconds, and the weight
+        penalty ‖θ‖²."""
+        import torch
+
+        self.model.eval()
+        vacc, v0 = torch.zeros(3, device=self.device), time.perf_counter()
+        with torch.no_grad():
+            for batch in loader.epoch(0):
+                vacc += self.step(batch, False)
+        vsums = vacc.tolist()
+        val_seconds = time.perf_counter() - v0
+        with torch.no_grad():
+            l2 = float(self.model.l2())
+        return vsums, val_seconds, l2
+
+
+def _run_config(cfg: TrainConfig, trainer: _Trainer, data: PairSet, *, texts: _Texts,
+                run: Path) -> dict[str, Any]:
+    """``config.json``: the settings, the model's architecture, the data's fingerprint, the
+    text encoder's source and digest, and what the run used."""
+    import torch
+
+    words, model = texts.words, trainer.model
+    return {**asdict(cfg), "model": asdict(trainer.mcfg), "run": str(run),
+            "data_fingerprint": data.fingerprint, "recipe_name": data.recipe_name,
+            "text_source": texts.source, "text_digest": texts.digest,
+            **({"vectors_source": words.source, "vectors_digest": texts.digest,
+                "vocab": len(words.words), "word_dim": words.dim} if words else
+               {"text_dim": texts.dim}),
+            "device_used": str(trainer.device),
+            "threads_used": torch.get_num_threads(),
+            "torch": str(torch.__version__), "machine": platform.platform(),
+            "parameters": sum(p.numel() for p in model.parameters() if p.requires_grad),
+            "versions": versions()}
+
+
+def _checkpoint_meta(config: dict[str, Any], data: PairSet, texts: _Texts) -> dict[str, Any]:
+    """What ``best.pt`` records beside the weights (its epoch and loss are added per epoch);
+    with the sentence encoder, the frozen embeddings of every known text."""
+    import torch
+
+    sentence_state = None
+    if texts.sentences is not None:
+        sentence_state = texts.sentences.state(texts.known)
+        sentence_state["embeddings"] = torch.from_numpy(sentence_state["embeddings"])
+    return {"config": config, "vectors_source": texts.source, "vectors_digest": texts.digest,
+            **({"sentences": sentence_state} if texts.sentences else {}),
+            "data_fingerprint": data.fingerprint, "commands": data.commands,
+            "words": texts.words.words if texts.words else ()}
+
+
+def _epoch(trainer: _Trainer, loaders: tuple[PairLoader, PairLoader], epoch: int, *,
+           best: float, run: Path, meta: dict[str, Any], log: Any) -> float:
+    """Train and validate one epoch, log its row, commit its checkpoints; the best validation
+    loss so far."""
+    sums, seconds, cpu_seconds = trainer.train_epoch(loaders[0], epoch)
+    vsums, val_seconds, l2 = trainer.validate(loaders[1])
+    val_loss = float(vsums[0] / vsums[2]) if vsums[2] else float("nan")
+    row = {"epoch": epoch, "train_loss": float(sums[0] / sums[2]),
+           "train_acc": float(sums[1] / sums[2]), "l2": l2, "val_loss": val_loss,
+           "val_acc": float(vsums[1] / vsums[2]) if vsums[2] else float("nan"),
+           "pairs_per_s": float(sums[2] / seconds), "seconds": seconds,
+           "cpu_seconds": cpu_seconds,
+           "val_seconds": val_seconds}
+    # without validation pairs, the last epoch is kept
+    row["best"] = bool(val_loss < best) if vsums[2] else True
+    if row["best"]:
+        best = val_loss if vsums[2] else best
+        _save_best(trainer, run, meta, epoch=epoch, val_loss=val_loss)
+    log.write(json.dumps(row) + "\n")
+    log.flush()
+    os.fsync(log.fileno())
+    _save_last(trainer, run, epoch, best)
+    if trainer.cfg.progress is not False:
+        from tqdm import tqdm
+
+        tqdm.write(f"epoch {epoch:>3}  train loss {row['train_loss']:.4f} acc "
+                   f"{row['train_acc']:.2%}  val loss {val_loss:.4f} acc "
+                   f"{row['val_acc']:.2%}  {row['pairs_per_s']:.0f} pairs/s"
+                   + ("  *" if row["best"] else ""))
+    return best
+
+
+def _save_best(trainer: _Trainer, run: Path, meta: dict[str, Any], *, epoch: int,
+               val_loss: float) -> None:
+    """``best.pt.next``: the weights and ``meta``, with this epoch and its validation loss."""
+    from sc2data.model import mem as M
+
+    rest = {k: v for k, v in meta.items() if k not in ("config", "words")}
+    M.save_checkpoint(run / f"{BEST}{NEXT}", trainer.model, meta["words"],
+                      {"config": meta["config"], "epoch": epoch, "val_loss": val_loss, **rest})
+
+
+def _save_last(trainer: _Trainer, run: Path, epoch: int, best: float) -> None:
+    """``last.pt`` (everything a resume needs), ``state.json``, then both renamed into place."""
+    import torch
+
+    from sc2data.model import mem as M
+
+    M.save_atomic({"epoch": epoch, "best": best, "model": trainer.model.state_dict(),
+                   "optimizer": trainer.optimizer.state_dict(),
+                   "torch_rng": torch.get_rng_state(),
+                   "numpy_rng": np.random.get_state(),
+                   "python_rng": random.getstate()}, run / f"{LAST}{NEXT}")
+    _write_state(run, epoch, trainer.cfg.epochs)
+    _settle(run, read_state(run))
 
 
 def _make_run_folder(run: Path) -> Path:
@@ -366,12 +482,11 @@ def _prepare_run(run: Path, cfg: TrainConfig) -> dict[str, Any] | None:
     if state is not None and not state["finished"] and not cfg.overwrite:
         diff = _differs(run, cfg)
         if diff:
-            raise Sc2DataError(f"run folder {run} holds an unfinished run with other settings "
-                               f"(differs in: {', '.join(diff)}); rerun it with its own "
-                               f"settings to resume, or pass --overwrite")
+            raise refusal(f"run folder {run}", "an unfinished run", diff, "rerun it with its own "
+                          "settings to resume, or pass --overwrite")
         _settle(run, state)
-        _keep_rows(run / "metrics.jsonl", int(state["epochs_done"]))  # a row logged after it
-        check_run(run, allow_unfinished=True, files=("config.json", "last.pt", "metrics.jsonl"))
+        _keep_rows(run / METRICS, int(state["epochs_done"]))  # a row logged after it
+        check_run(run, allow_unfinished=True, files=(CONFIG, LAST, METRICS))
         return state
     if not cfg.overwrite:
         what = (f"a finished run with other settings (differs in: {', '.join(_differs(run, cfg))})"
@@ -389,11 +504,10 @@ class RunFinished(Exception):
 
 def _differs(run: Path, cfg: TrainConfig) -> list[str]:
     """The settings of ``cfg`` that differ from those the run in ``run`` was started with."""
-    old, new = read_config(run) or {}, asdict(cfg)
-    # a setting added since the run was started reads as its default
+    new = asdict(cfg)
     default = {f.name: f.default for f in fields(TrainConfig) if f.default is not MISSING}
-    return sorted(k for k in new if k not in RESUME_IGNORES
-                  and old.get(k, default.get(k)) != new[k])
+    return differences(read_config(run) or {}, new, keys=new, ignore=RESUME_IGNORES,
+                       defaults=default)
 
 
 def _keep_rows(path: Path, n: int) -> None:
@@ -406,12 +520,12 @@ def _write_state(run: Path, epoch: int, epochs: int) -> None:
     """Record progress and every run file's sha256, after the files themselves: an epoch's new
     checkpoints (``*.pt.next``) are recorded under their final names, which they take after."""
     sums = {}
-    for n in ("config.json", "metrics.jsonl", *CHECKPOINTS):
+    for n in (CONFIG, METRICS, *CHECKPOINTS):
         path = run / f"{n}{NEXT}" if (run / f"{n}{NEXT}").is_file() else run / n
         if path.exists():
             sums[n] = sha256_file(path)
     state = {"epochs_done": epoch, "epochs": epochs, "finished": epoch == epochs, "sha256": sums}
-    write_atomic(run / STATE_FILE, (json.dumps(state, indent=1) + "\n").encode())
+    write_atomic(run / STATE, (json.dumps(state, indent=1) + "\n").encode())
 
 
 def _settle(run: Path, state: dict[str, Any] | None, *, discard: bool = True) -> None:
@@ -439,30 +553,25 @@ CONFIG_SHAPE: Shape = {"data": str, "epochs": int, "batch_size": int, "lr": floa
 
 
 def _read_record(path: Path, shape: Shape) -> dict[str, Any]:
-    try:
-        record = loads(path.read_text())
-    except (OSError, ValueError) as e:
-        raise Sc2DataError(f"{path} is unreadable ({e}); train again with --overwrite") from None
-    check_record(record, shape, path, "train again with --overwrite")
-    return record
+    return read_record(path, shape, "train again with --overwrite")  # type: ignore[no-any-return]
 
 
 def read_state(run: Path) -> dict[str, Any] | None:
     """``state.json`` of a run folder (None if it has none); one-line error if unreadable."""
-    path = run / STATE_FILE
+    path = run / STATE
     return _read_record(path, STATE_SHAPE) if path.is_file() else None
 
 
 def read_config(run: Path) -> dict[str, Any] | None:
     """``config.json`` of a run folder (None if it has none); one-line error if unreadable."""
-    path = run / "config.json"
+    path = run / CONFIG
     return _read_record(path, CONFIG_SHAPE) if path.is_file() else None
 
 
 def _digest(run: Path, name: str, state: dict[str, Any]) -> str:
     """sha256 of a run file as ``state.json`` recorded it: of ``metrics.jsonl``, its first
     ``epochs_done`` rows (a row logged after the state was recorded is not yet part of it)."""
-    if name != "metrics.jsonl":
+    if name != METRICS:
         return sha256_file(run / name)
     n = int(state.get("epochs_done", 0))
     rows = (run / name).read_bytes().splitlines(keepends=True)[:n]
@@ -470,12 +579,12 @@ def _digest(run: Path, name: str, state: dict[str, Any]) -> str:
 
 
 def check_run(run: Path, *, allow_unfinished: bool = False,
-              files: tuple[str, ...] = ("config.json", "best.pt")) -> dict[str, Any]:
+              files: tuple[str, ...] = (CONFIG, BEST)) -> dict[str, Any]:
     """One-line error unless ``run`` is a run folder whose ``files`` are the bytes training
     wrote, and (unless allowed) a finished one. Returns its state."""
     state = read_state(run)
     if state is None:
-        raise Sc2DataError(f"{run} has no {STATE_FILE}: not a run of this sc2data, or one "
+        raise Sc2DataError(f"{run} has no {STATE}: not a run of this sc2data, or one "
                            f"interrupted before its first epoch; train it again")
     _settle(run, state, discard=False)  # an epoch committed but not yet renamed: finish it
     if not state["finished"] and not allow_unfinished:
@@ -491,5 +600,5 @@ def check_run(run: Path, *, allow_unfinished: bool = False,
                                    f"progress, its files not final yet; read it when that "
                                    f"command has finished")
             raise Sc2DataError(f"{run / name} is missing, damaged or was replaced (its sha256 "
-                               f"differs from {STATE_FILE}); train the run again")
+                               f"differs from {STATE}); train the run again")
     return state

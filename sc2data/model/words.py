@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sc2data.errors import MissingDependencyError, Sc2DataError
+from sc2data.ground.errors import MissingDependencyError, Sc2DataError
 
 DEFAULT_VOCAB = 50_000
 SCAN_LIMIT = 400_000

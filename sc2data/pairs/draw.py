@@ -37,9 +37,9 @@ from dataclasses import dataclass
 import numpy as np
 import pyarrow as pa
 
-from sc2data.errors import Sc2DataError
-from sc2data.recipe import Command, Recipe, apportion
-from sc2data.vocab import SPLITS
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.recipe import Command, Recipe, apportion
+from sc2data.ground.vocab import SPLITS
 
 PAIR_SCHEMA = pa.schema([
     ("split", pa.string()), ("episode", pa.int64()), ("step", pa.int32()),
@@ -110,52 +110,85 @@ def build_pairs(recipe: Recipe, data: Labelled | Sequence[Labelled]) -> pa.Table
     recipe's order); deterministic for ``recipe.seed``."""
     sources = [data] if isinstance(data, Labelled) else list(data)
     shares = recipe.shares
-    names = [s.name for s in recipe.sources] or [""]
     if len(sources) != len(shares):
         raise ValueError(f"recipe {recipe.name!r} has {len(shares)} source(s), got {len(sources)}")
-    parts = []
-    for d in sources:
-        order = np.lexsort((d.step, d.episode))  # input order must not matter
-        parts.append((d.episode[order], d.step[order], d.fires[order]))
-    episode = np.concatenate([p[0] for p in parts])
-    step = np.concatenate([p[1] for p in parts])
-    fires = np.concatenate([p[2] for p in parts])
-    src = np.repeat(np.arange(len(parts)), [len(p[0]) for p in parts])
-    commands = recipe.commands
-    n_cmd = len(commands)
+    s = _Stacks.of(sources, [x.name for x in recipe.sources] or [""])
     rng = np.random.default_rng(np.random.SeedSequence([recipe.seed, 0x5C2DA7A]))
-    fractions = recipe.split.fractions
-    is_null = ~fires.any(axis=1)
+    split_of, quotas, null_quota, pools = _split(recipe, s, rng)
+    chosen = _choose(recipe, s, split_of, quotas=quotas, null_quota=null_quota, pools=pools,
+                     rng=rng)
+    return _pair_table(recipe, s, chosen, rng)
 
-    n_episodes = len(np.unique(episode)) if len(parts) == 1 else 0
-    if recipe.split.method == "episode":
-        for k, (e, _, f) in enumerate(parts):
-            n = len(np.unique(e))
-            if n < len(fractions):
-                error = _too_few_episodes(recipe, f, ~f.any(axis=1), n)
-                if len(parts) == 1:
-                    raise error
-                raise SourceShortage(f"source {names[k]}: {error.shortfall}",
-                                     f"grow source {names[k]}", {names[k]: error.episodes})
-    if recipe.split.method == "episode":
-        split_of = np.empty(len(episode), np.int64)
-        for k in range(len(parts)):  # each source's episodes split on their own
-            mine = src == k
-            split_map = _assign_episodes(episode[mine], fractions, rng)
-            split_of[mine] = np.fromiter((split_map[int(e)] for e in episode[mine]), np.int64,
-                                         int(mine.sum()))
-        quotas = np.array([apportion(recipe.pairs.states_per_command, fractions)] * n_cmd).T
-        null_quota = apportion(recipe.pairs.null_states, fractions)
-        pools = list(range(len(SPLITS)))
-    else:  # random: draw from the whole pool, split the pairs afterwards
-        split_of = np.zeros(len(episode), np.int64)
-        quotas = np.array([[recipe.pairs.states_per_command] * n_cmd])
-        null_quota = [recipe.pairs.null_states]
-        pools = [0]
 
-    # A state that satisfies every command has no possible mismatch: it is never drawn.
-    used = fires.all(axis=1)
-    chosen: list[tuple[int, np.ndarray, np.ndarray]] = []  # (pool, state idx, command idx)
+@dataclass(frozen=True)
+class _Stacks:
+    """Every source's labelled stacks, each sorted by (episode, step), laid end to end."""
+
+    parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]]
+    """(episode, step, fires) of each source."""
+    names: list[str]
+    episode: np.ndarray
+    step: np.ndarray
+    fires: np.ndarray
+    src: np.ndarray
+    """The source of each stack (its index in :attr:`parts`)."""
+
+    @classmethod
+    def of(cls, sources: Sequence[Labelled], names: list[str]) -> _Stacks:
+        parts = []
+        for d in sources:
+            order = np.lexsort((d.step, d.episode))  # input order must not matter
+            parts.append((d.episode[order], d.step[order], d.fires[order]))
+        return cls(parts, names, np.concatenate([p[0] for p in parts]),
+                   np.concatenate([p[1] for p in parts]), np.concatenate([p[2] for p in parts]),
+                   np.repeat(np.arange(len(parts)), [len(p[0]) for p in parts]))
+
+    @property
+    def is_null(self) -> np.ndarray:
+        return ~self.fires.any(axis=1)
+
+    def what(self, name: str, k: int) -> str:
+        """A quota's name in a shortage message: the command (or null), and its source."""
+        return name if len(self.parts) == 1 else f"{name} from {self.names[k]}"
+
+
+def _split(recipe: Recipe, s: _Stacks, rng: np.random.Generator
+           ) -> tuple[np.ndarray, np.ndarray, list[int], list[int]]:
+    """Each stack's pool, the states each command needs from each pool, the null states each
+    pool needs, and the pools: by episode, the splits (each source's episodes split on their
+    own); random, one pool, split into pairs afterwards."""
+    fractions, n_cmd = recipe.split.fractions, len(recipe.commands)
+    if recipe.split.method != "episode":
+        return (np.zeros(len(s.episode), np.int64),
+                np.array([[recipe.pairs.states_per_command] * n_cmd]),
+                [recipe.pairs.null_states], [0])
+    for k, (e, _, f) in enumerate(s.parts):
+        n = len(np.unique(e))
+        if n < len(fractions):
+            error = _too_few_episodes(recipe, f, ~f.any(axis=1), n)
+            if len(s.parts) == 1:
+                raise error
+            raise SourceShortage(f"source {s.names[k]}: {error.shortfall}",
+                                 f"grow source {s.names[k]}", {s.names[k]: error.episodes})
+    split_of = np.empty(len(s.episode), np.int64)
+    for k in range(len(s.parts)):
+        mine = s.src == k
+        split_map = _assign_episodes(s.episode[mine], fractions, rng)
+        split_of[mine] = np.fromiter((split_map[int(e)] for e in s.episode[mine]), np.int64,
+                                     int(mine.sum()))
+    quotas = np.array([apportion(recipe.pairs.states_per_command, fractions)] * n_cmd).T
+    return (split_of, quotas, apportion(recipe.pairs.null_states, fractions),
+            list(range(len(SPLITS))))
+
+
+def _choose(recipe: Recipe, s: _Stacks, split_of: np.ndarray, *, quotas: np.ndarray,
+            null_quota: list[int], pools: list[int], rng: np.random.Generator
+            ) -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """(pool, state indices, command indices, -1 for null) of the states drawn for each quota;
+    a shortage (one line) if any quota cannot be met. A state that satisfies every command has
+    no possible mismatch: it is never drawn."""
+    used = s.fires.all(axis=1)
+    chosen: list[tuple[int, np.ndarray, np.ndarray]] = []
     filled: dict[str, list[int]] = {}  # what → [states usable, states the recipe asks for]
     unmet: list[tuple[str, int, int]] = []  # (what, found, need) of each quota not met
 
@@ -167,32 +200,37 @@ def build_pairs(recipe: Recipe, data: Labelled | Sequence[Labelled]) -> pa.Table
             unmet.append((what, found, need))
         return found < need
 
-    def what(name: str, k: int) -> str:
-        return name if len(parts) == 1 else f"{name} from {names[k]}"
-
+    is_null = s.is_null
     for pool in pools:
-        for k in range(len(parts)):
-            mine = (split_of == pool) & (src == k)
+        for k in range(len(s.parts)):
+            mine = (split_of == pool) & (s.src == k)
             # Rarest command first, so a stack satisfying two commands serves the scarcer one.
-            rarity = np.argsort((fires & mine[:, None]).sum(axis=0), kind="stable")
+            rarity = np.argsort((s.fires & mine[:, None]).sum(axis=0), kind="stable")
             for c in rarity:
-                need = apportion(int(quotas[pool][c]), shares)[k]
-                cand = np.flatnonzero(fires[:, c] & mine & ~used)
-                if short(what(commands[c].id, k), len(cand), need):
+                need = apportion(int(quotas[pool][c]), recipe.shares)[k]
+                cand = np.flatnonzero(s.fires[:, c] & mine & ~used)
+                if short(s.what(recipe.commands[c].id, k), len(cand), need):
                     continue
                 pick = np.sort(rng.choice(cand, size=need, replace=False))
                 used[pick] = True
                 chosen.append((pool, pick, np.full(need, c)))
-            need = apportion(null_quota[pool], shares)[k]
+            need = apportion(null_quota[pool], recipe.shares)[k]
             cand = np.flatnonzero(is_null & mine)
-            if not short(what("null", k), len(cand), need):
+            if not short(s.what("null", k), len(cand), need):
                 chosen.append((pool, np.sort(rng.choice(cand, size=need, replace=False)),
                                np.full(need, -1)))
-    if unmet and len(parts) == 1:
-        raise _shortage(recipe, fires, is_null, filled, unmet, n_episodes)
+    if unmet and len(s.parts) == 1:
+        n_episodes = len(np.unique(s.episode))
+        raise _shortage(recipe, s.fires, is_null, filled, unmet, n_episodes)
     if unmet:
-        raise _source_shortage(recipe, parts, names, filled, unmet)
+        raise _source_shortage(recipe, s.parts, s.names, filled, unmet)
+    return chosen
 
+
+def _pair_columns(s: _Stacks, chosen: list[tuple[int, np.ndarray, np.ndarray]], ids: np.ndarray,
+                  n_cmd: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """The pairs of the states drawn, column by column: a matched and a mismatched pair per
+    command state, a null pair (a random command) per null state."""
     columns: dict[str, list[np.ndarray]] = {k: [] for k in ("pool", "idx", "cmd", "target",
                                                              "kind", "label")}
 
@@ -205,35 +243,42 @@ def build_pairs(recipe: Recipe, data: Labelled | Sequence[Labelled]) -> pa.Table
         columns["kind"].append(np.full(len(idx), kind, object))
         columns["label"].append(label)
 
-    ids = np.array([c.id for c in commands] + [""], dtype=object)  # ids[-1] = "" for null
     for pool, idx, cmd in chosen:
         if cmd.size and cmd[0] < 0:
             add(pool, idx, rng.integers(0, n_cmd, len(idx)), 1.0, "null", ids[cmd])
             continue
         add(pool, idx, cmd, 0.0, "matched", ids[cmd])
-        add(pool, idx, _draw_mismatch(fires[idx], rng), 1.0, "mismatched", ids[cmd])
+        add(pool, idx, _draw_mismatch(s.fires[idx], rng), 1.0, "mismatched", ids[cmd])
+    return {k: np.concatenate(v) for k, v in columns.items()}
 
-    pool = np.concatenate(columns["pool"])
-    idx = np.concatenate(columns["idx"])
-    cmd = np.concatenate(columns["cmd"])
+
+def _pair_table(recipe: Recipe, s: _Stacks, chosen: list[tuple[int, np.ndarray, np.ndarray]],
+                rng: np.random.Generator) -> pa.Table:
+    """The pairs as a table in a stable, readable order (split, then source, episode, step),
+    training pairs' texts drawn from the training phrasings."""
+    commands = recipe.commands
+    ids = np.array([c.id for c in commands] + [""], dtype=object)  # ids[-1] = "" for null
+    col = _pair_columns(s, chosen, ids, len(commands), rng)
+    pool, idx, cmd = col["pool"], col["idx"], col["cmd"]
     if recipe.split.method == "random":
-        pool = rng.permutation(np.repeat(np.arange(len(SPLITS)), apportion(len(idx), fractions)))
+        pool = rng.permutation(np.repeat(np.arange(len(SPLITS)),
+                                         apportion(len(idx), recipe.split.fractions)))
     texts = np.array([c.text for c in commands], dtype=object)
-    source = {"source": pa.array(np.array(names, dtype=object)[src[idx]], pa.string())} \
-        if len(parts) > 1 else {}
+    several = len(s.parts) > 1
+    source = {"source": pa.array(np.array(s.names, dtype=object)[s.src[idx]], pa.string())} \
+        if several else {}
     table = pa.table({
         "split": pa.array(np.array(SPLITS, dtype=object)[pool], pa.string()),
         **source,
-        "episode": pa.array(episode[idx], pa.int64()),
-        "step": pa.array(step[idx], pa.int32()),
+        "episode": pa.array(s.episode[idx], pa.int64()),
+        "step": pa.array(s.step[idx], pa.int32()),
         "command_id": pa.array(ids[cmd], pa.string()),
         "command": pa.array(texts[cmd], pa.string()),
-        "target": pa.array(np.concatenate(columns["target"]), pa.float32()),
-        "kind": pa.array(np.concatenate(columns["kind"]), pa.string()),
-        "label": pa.array(np.concatenate(columns["label"]), pa.string()),
-    }, schema=PAIR_SCHEMA if len(parts) == 1 else SOURCES_SCHEMA)
-    # Stable, readable order: by split, then by state (source, episode, step).
-    keys = np.lexsort((step[idx], episode[idx], src[idx], pool))
+        "target": pa.array(col["target"], pa.float32()),
+        "kind": pa.array(col["kind"], pa.string()),
+        "label": pa.array(col["label"], pa.string()),
+    }, schema=SOURCES_SCHEMA if several else PAIR_SCHEMA)
+    keys = np.lexsort((s.step[idx], s.episode[idx], s.src[idx], pool))
     table = table.take(pa.array(keys))
     if any(c.train_paraphrases for c in commands):
         texts = draw_texts(commands, cmd[keys], pool[keys] == SPLITS.index("train"), recipe.seed)

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sc2data.errors import Sc2DataError
-from sc2data.files import sha256_files
-from sc2data.vocab import SPLITS
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import sha256_files
+from sc2data.ground.vocab import SPLITS
 
 PAIRS_FILE = "pairs.parquet"
 META_FILE = "pairset.json"

@@ -20,8 +20,8 @@ from typing import Any
 import numpy as np
 import pyarrow.parquet as pq
 
-from sc2data.errors import Sc2DataError
-from sc2data.formats import PAIRSET, loads
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.formats import PAIRSET, loads
 from sc2data.pairs.layout import META_FILE, PAIRS_FILE, check_content, packed_path
 from sc2data.pairs.packed import BLOCK, PackedSplit
 from sc2data.schema import Schema, SchemaError
@@ -157,7 +157,7 @@ class PairLoader:
     """
 
     def __init__(self, packed: PackedSplit, state: np.ndarray, text: np.ndarray,
-                 target: np.ndarray, batch_size: int, keys: Sequence[str], shuffle: bool,
+                 target: np.ndarray, *, batch_size: int, keys: Sequence[str], shuffle: bool,
                  seed: int = 0, window: int = 4, prefetch: int = 16,
                  transform: Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]] | None = None,
                  collate: Callable[[dict[str, np.ndarray]], Any] | None = None) -> None:

@@ -20,9 +20,9 @@ import h5py
 import hdf5plugin
 import numpy as np
 
-from sc2data.errors import Sc2DataError
-from sc2data.files import PARTIAL, publish
-from sc2data.formats import PACKED
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import PARTIAL, publish
+from sc2data.ground.formats import PACKED
 from sc2data.schema import Schema, SchemaError, StackBatch
 
 BLOCK = 256
@@ -30,8 +30,9 @@ BLOCK = 256
 
 
 def _compression() -> Mapping[str, Any]:
-    # LZ4 decodes fastest of the lossless HDF5 filters we measured (BENCHMARKS.md, codecs); training decodes every
-    # stack once per epoch, so decode speed matters more than the last few percent of size.
+    # LZ4 decodes fastest of the lossless HDF5 filters we measured (BENCHMARKS.md, codecs);
+    # training decodes every stack once per epoch, so decode speed matters more than the last few
+    # percent of size.
     return dict(hdf5plugin.LZ4())
 
 
@@ -131,7 +132,8 @@ class PackedSplit:
         return self.n
 
     def read(self, start: int, stop: int, keys: Sequence[str] | None = None) -> StackBatch:
-        """Stacks ``[start, stop)`` as a :class:`StackBatch` (contiguous read, no fancy indexing)."""
+        """Stacks ``[start, stop)`` as a :class:`StackBatch` (contiguous read, no fancy
+        indexing)."""
         keys = tuple(keys) if keys is not None else self.schema.keys()
         return StackBatch({k: self._f[k][start:stop] for k in keys}, self.schema)
 

@@ -28,19 +28,25 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from sc2data.data.dataset import Dataset
-from sc2data.errors import Sc2DataError, reason
-from sc2data.files import (
+from sc2data.data.dataset import Dataset, open_dataset, read_index, read_manifest
+from sc2data.ground.errors import Sc2DataError, reason
+from sc2data.ground.files import (
     PARTIAL,
     FolderLock,
-    sha256_file,
     check_out,
     fsync_path,
     publish,
+    sha256_file,
     sha256_files,
     write_atomic,
 )
-from sc2data.formats import PAIRSET, loads
+from sc2data.ground.formats import PAIRSET, loads
+from sc2data.ground.progress import Bar
+from sc2data.ground.progress import bar as progress_bar
+from sc2data.ground.provenance import versions
+from sc2data.ground.recipe import Recipe, RolloutSpec
+from sc2data.ground.resume import differences
+from sc2data.ground.vocab import SPLITS
 from sc2data.labels.apply import labels_fingerprint
 from sc2data.pairs.draw import Labelled, NotEnoughStates, SourceShortage, build_pairs
 from sc2data.pairs.layout import (
@@ -52,11 +58,7 @@ from sc2data.pairs.layout import (
     packed_path,
 )
 from sc2data.pairs.packed import PackedWriter
-from sc2data.progress import Bar
-from sc2data.provenance import versions
-from sc2data.recipe import Recipe, RolloutSpec
 from sc2data.schema import StackBatch
-from sc2data.vocab import SPLITS
 
 READ_BATCH = 1024
 """Stacks read from the rollout shards per call while packing."""
@@ -96,7 +98,8 @@ def check_texts(recipe: Recipe, rule_commands: dict[str, str]) -> None:
         if rule_text is not None and c.text != rule_text:
             raise Sc2DataError(f"recipe {recipe.name!r}: command {c.id} has text {c.text!r}, but "
                                f"rule {c.id} says {rule_text!r}; use the rule's text in the "
-                               f"recipe and list other wordings as train_paraphrases or paraphrases")
+                               f"recipe and list other wordings as train_paraphrases or "
+                               f"paraphrases")
 
 
 def check_rollout(recipe: Recipe, settings: dict[str, Any], data: Path,
@@ -106,7 +109,8 @@ def check_rollout(recipe: Recipe, settings: dict[str, Any], data: Path,
     claim must be true."""
     spec = spec or recipe.rollout
     differ = [f"{k} {settings.get(k)!r} (recipe: {getattr(spec, k)!r})"
-              for k in ("env", "agent", "layers", "step_mul") if settings.get(k) != getattr(spec, k)]
+              for k in ("env", "agent", "layers", "step_mul")
+              if settings.get(k) != getattr(spec, k)]
     if differ:
         raise Sc2DataError(f"{data} was not rolled out as recipe {recipe.name!r} says: "
                            f"{'; '.join(differ)}; pair it with a recipe that describes it, or "
@@ -195,7 +199,7 @@ def _same(meta: dict[str, Any], identity: dict[str, Any]) -> bool:
     """The record was drawn from this recipe and these labels: only the fields that decide the
     content count (an earlier sc2data also stored when the labels were made, ``labels_created``)."""
     stored = meta.get("identity")
-    return isinstance(stored, dict) and {k: stored.get(k) for k in identity} == identity
+    return isinstance(stored, dict) and not differences(stored, identity, keys=identity)
 
 
 def _other(out: Path, data: Path, recipe: Recipe, identity: dict[str, Any],
@@ -213,7 +217,7 @@ def _other(out: Path, data: Path, recipe: Recipe, identity: dict[str, Any],
         name = old.get("name") if isinstance(old, dict) else meta.get("recipe_name")
         return f"{out} holds the pair set of recipe {name!r}, not {recipe.name!r}{by}; {remedy}"
     if old != new:
-        differ = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
+        differ = differences(old, new)
         return f"{out} holds a pair set of another version of recipe {recipe.name!r} (differs " \
                f"in: {', '.join(differ)}){by}; {remedy}"
     code = {r.get("id"): r.get("code_sha256") for r in meta.get("labels", {}).get("rules") or []
@@ -325,8 +329,6 @@ def _read(datasets: Sequence[Dataset], k: np.ndarray) -> StackBatch:
 
 def _check_shards(folder: Path) -> None:
     """One line unless every shard the index lists is the bytes it recorded."""
-    from sc2data.data.dataset import read_index
-
     index = read_index(folder).to_pydict()
     for name, sha in sorted(set(zip(index["shard"], index["shard_sha256"]))):
         path = folder / name
@@ -339,8 +341,6 @@ def _check_sources(recipe: Recipe, data: Path) -> tuple[list[Labelled], list[dic
     """Each of a recipe's sources (``DATA/NAME``) as labelled stacks, with its labels' record;
     a one-line error naming the first that is missing, damaged, rolled out otherwise than its
     source says, labelled by other rules' code, or of another schema than the first."""
-    from sc2data.data.dataset import read_manifest
-
     labelled, metas = [], []
     first: tuple[str, dict[str, Any], dict[str, Any]] | None = None
     for source in recipe.sources:
@@ -377,8 +377,6 @@ def _check_sources(recipe: Recipe, data: Path) -> tuple[list[Labelled], list[dic
 def make_pairset(recipe: Recipe, data: str | os.PathLike[str], out: str | os.PathLike[str], *,
                  progress: bool | None = None) -> PairsetSummary:
     """Build the recipe's pair set from the labelled dataset ``data`` into the folder ``out``."""
-    from sc2data.data.dataset import read_manifest
-
     started = time.perf_counter()
     data, out = Path(data), Path(out)
     check_out(out)
@@ -428,8 +426,6 @@ def _make(recipe: Recipe, data: Path, out: Path, labelled: list[Labelled],
           labels_meta: dict[str, Any], started: float, progress: bool | None,
           sources: list[dict[str, Any]], drawn: pa.Table | None) -> PairsetSummary:
     """``make_pairset`` under its lock."""
-    from sc2data.data.dataset import open_dataset
-    from sc2data.progress import bar as progress_bar
 
     identity = _identity(recipe, labels_meta, sources or None)
     done = _existing(out, identity)

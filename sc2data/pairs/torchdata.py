@@ -35,13 +35,13 @@ from typing import Any
 
 import numpy as np
 
-from sc2data.errors import MissingDependencyError, Sc2DataError
+from sc2data.ground.errors import MissingDependencyError, Sc2DataError
 from sc2data.pairs.layout import PAIRS_FILE, fingerprint, packed_path
 from sc2data.pairs.loader import SPLITS, PairSet
 from sc2data.pairs.packed import BLOCK
 
 try:
-    import torch
+    import torch  # noqa: F401  (present: the loader's tensors)
     from torch.utils.data import Dataset, Sampler
 except ImportError:
     raise MissingDependencyError("torch", "train", "sc2data.pairs.torchdata") from None

@@ -30,16 +30,17 @@ from typing import Any
 import numpy as np
 
 from sc2data._pysc2 import actions, base_agent
-from sc2data.errors import Sc2DataError
-from sc2data.files import sha256_file
 from sc2data.game.agents import AgentSpec, ReducedRandomAgent, register_agent_kind
 from sc2data.game.screen import ScreenView
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import sha256_file
+from sc2data.ground.vocab import SCREEN_SIZE
+from sc2data.rl.runs import MODEL
 
-CHECKPOINT = "model.zip"
+CHECKPOINT = MODEL
 _LOADED: dict[tuple[str, str], tuple[Any, Any]] = {}
 """(run, sha256) → (model, RLConfig), one load per process (a factory makes an agent per
 episode)."""
-
 
 def _load(run: str, sha256: str) -> tuple[Any, Any]:
     """The run's policy and settings, once per process; the checkpoint must be ``sha256``."""
@@ -136,7 +137,6 @@ class PolicyAgent(base_agent.BaseAgent):
         """The paper space's mask, as the env's ``action_masks``: available functions, then
         every x and every y."""
         from sc2data.rl.envs import PAPER_FUNCTIONS
-        from sc2data.vocab import SCREEN_SIZE
 
         available = view.available
         funcs = [int(actions.FUNCTIONS[n].id) in available for n in PAPER_FUNCTIONS]

@@ -32,13 +32,16 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from sc2data.errors import Sc2DataError
-from sc2data.files import write_atomic
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import write_atomic
+from sc2data.ground.vocab import STEP_MUL
+from sc2data.rl.runs import MODEL
 
 AGREEMENT_SEED = 2_000_000
 """First episode seed of an agreement measurement (neither training's nor evaluation's)."""
@@ -52,7 +55,6 @@ BATCH = 512
 PairReward = Callable[[np.ndarray, np.ndarray], np.ndarray]
 """``reward(i, j)``: the reward of the transitions from state ``i[k]`` to state ``j[k]`` (state
 indices), shape ``(P,)`` or ``(P, K)`` for K rewards at once."""
-
 
 def canonical(reward: PairReward, s: np.ndarray, s2: np.ndarray, support: np.ndarray,
               gamma: float) -> np.ndarray:
@@ -113,7 +115,7 @@ def agreement(run: Path, mem: Path, *, episodes: int = 3, deterministic: bool = 
     """Play ``episodes`` episodes of the policy in ``run``; per-command agreement of the MEM in
     ``mem`` with the rules on the stacks visited, and the two rewards' correlation and EPIC
     distance. Written to ``out`` (default ``RUN/agreement.json``) and returned."""
-    from sc2data.rl.train import load_config, play, require_rl
+    from sc2data.rl.train import load_config, require_rl
 
     require_rl("sc2data rl agreement")
     if episodes < 1:
@@ -122,113 +124,162 @@ def agreement(run: Path, mem: Path, *, episodes: int = 3, deterministic: bool = 
     import json
 
     import torch
-    from sb3_contrib import MaskablePPO
-
-    from sc2data.labels.registry import call, load_registry
-    from sc2data.model.reward import load_model
-    from sc2data.rl.envs import BuildMarinesGym
-    from sc2data.rulebase import schema_for, stack
-    from sc2data.vocab import STEP_MUL
 
     torch.set_num_threads(1)
-    scorer = load_model(mem)
-    commands = [c for c in scorer.commands if c.get("id") and c.get("text")]
-    if not commands:
-        raise Sc2DataError(f"{mem} records no commands (train it with this sc2data version)")
-    ids = [str(c["id"]) for c in commands]
-    texts = [str(c["text"]) for c in commands]
-    registry = load_registry()
-    entries = [registry.get(i) for i in ids]  # an unknown id: one line naming the known ones
-    rule_schema = schema_for(k for e in entries for k in e.rule.requires if "/" in k)
-    limit = scorer.threshold if threshold is None else float(threshold)
+    judge = _Judge.load(mem, threshold)
+    seen = _play(run, cfg, judge, episodes=episodes, deterministic=deterministic)
+    n = len(judge.ids)
+    fired = np.concatenate(seen.fired) if seen.fired else np.zeros((0, n), bool)
+    matched = np.concatenate(seen.matched) if seen.matched else np.zeros((0, n), bool)
 
-    def judge(rule_frames: list[Any], mem_frames: list[Any], i: np.ndarray, j: np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray]:
+    def both(i: np.ndarray, j: np.ndarray) -> np.ndarray:
+        f, m = judge(seen.kept_rule, seen.kept_mem, i, j)
+        return np.stack([f.sum(1), m.sum(1)], axis=1).astype(float)
+
+    epic = None
+    if seen.drawn:
+        s, s2 = (np.array(x) for x in zip(*seen.drawn))
+        epic = epic_distance(both, s, s2, np.array(seen.support), cfg.gamma)
+    result = _result(judge, fired, matched, epic=epic, seen=seen, cfg=cfg,
+                     head={"run": str(run), "mem": str(mem), "episodes": episodes,
+                           "seeds": [AGREEMENT_SEED + e for e in range(episodes)],
+                           "deterministic": deterministic, "threshold": judge.limit})
+    path = out or run / "agreement.json"
+    write_atomic(path, (json.dumps(result, indent=1) + "\n").encode())
+    return result
+
+
+@dataclass
+class _Judge:
+    """The rules and the MEM of the commands a MEM records, judging stacks by the batch."""
+
+    scorer: Any
+    ids: list[str]
+    texts: list[str]
+    entries: list[Any]
+    rule_schema: Any
+    limit: float
+
+    @classmethod
+    def load(cls, mem: Path, threshold: float | None) -> _Judge:
+        """The MEM in ``mem``, its commands and their rules (an unknown id: one line naming the
+        known ones); ``threshold`` (default the MEM's own) is its distance for a match."""
+        from sc2data.labels.registry import load_registry
+        from sc2data.model.scorer import load_model
+        from sc2data.rulebase import schema_for
+
+        scorer = load_model(mem)
+        commands = [c for c in scorer.commands if c.get("id") and c.get("text")]
+        if not commands:
+            raise Sc2DataError(f"{mem} records no commands (train it with this sc2data version)")
+        ids = [str(c["id"]) for c in commands]
+        registry = load_registry()
+        entries = [registry.get(i) for i in ids]
+        return cls(scorer, ids, [str(c["text"]) for c in commands], entries,
+                   schema_for(k for e in entries for k in e.rule.requires if "/" in k),
+                   scorer.threshold if threshold is None else float(threshold))
+
+    def __call__(self, rule_frames: list[Any], mem_frames: list[Any], i: np.ndarray,
+                 j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(fired (P, n), matched (P, n)) of the stacks (frame i[k], frame j[k])."""
+        from sc2data.labels.registry import call
+        from sc2data.rulebase import stack
+
         fired, matched = [], []
         for a in range(0, len(i), BATCH):
             pairs = list(zip(i[a:a + BATCH].tolist(), j[a:a + BATCH].tolist()))
-            rb = stack([(rule_frames[p], rule_frames[q]) for p, q in pairs], rule_schema)
+            rb = stack([(rule_frames[p], rule_frames[q]) for p, q in pairs], self.rule_schema)
             fired.append(np.stack([np.asarray(call(e.rule, e.source, rb, "a policy's stacks"),
-                                              bool) for e in entries], axis=1))
-            mb = stack([(mem_frames[p], mem_frames[q]) for p, q in pairs], scorer.schema)
-            matched.append(scorer.distances(mb, texts) < limit)
+                                              bool) for e in self.entries], axis=1))
+            mb = stack([(mem_frames[p], mem_frames[q]) for p, q in pairs], self.scorer.schema)
+            matched.append(self.scorer.distances(mb, self.texts) < self.limit)
         return np.concatenate(fired), np.concatenate(matched)
 
-    model = MaskablePPO.load(run / "model.zip", device="cpu")
+
+@dataclass
+class _Seen:
+    """What the policy's episodes showed: each episode's judged stacks, and the frames, drawn
+    transitions and support states of the EPIC sample (indices into the kept frames)."""
+
+    fired: list[np.ndarray] = field(default_factory=list)
+    matched: list[np.ndarray] = field(default_factory=list)
+    kept_rule: list[Any] = field(default_factory=list)
+    kept_mem: list[Any] = field(default_factory=list)
+    drawn: list[tuple[int, int]] = field(default_factory=list)
+    support: list[int] = field(default_factory=list)
+    marines: list[int] = field(default_factory=list)
+
+
+def _play(run: Path, cfg: Any, judge: _Judge, *, episodes: int, deterministic: bool) -> _Seen:
+    """Play the policy's episodes, judge every stack, and draw each episode's share of the EPIC
+    sample."""
+    from sb3_contrib import MaskablePPO
+
+    from sc2data.rl.envs import BuildMarinesGym
+    from sc2data.rl.train import play
+
+    model = MaskablePPO.load(run / MODEL, device="cpu")
     loops = cfg.episode_steps * STEP_MUL if cfg.episode_steps else None
     env = BuildMarinesGym(cfg.action_space, backend=cfg.backend, obs=cfg.obs_config(),
                           game_loops=loops)
     pick = np.random.default_rng(AGREEMENT_SEED)
-    n = len(ids)
-    fired_all: list[np.ndarray] = []
-    matched_all: list[np.ndarray] = []
-    kept_rule: list[Any] = []  # frames of the drawn transitions and support states
-    kept_mem: list[Any] = []
-    drawn: list[tuple[int, int]] = []
-    support: list[int] = []
-    marines: list[int] = []
+    seen = _Seen()
     try:
         for e in range(episodes):
             rule_frames: list[Any] = []
             mem_frames: list[Any] = []
-            for info in play(model, env, AGREEMENT_SEED + e, deterministic):
+            for info in play(model, env, AGREEMENT_SEED + e, deterministic):  # noqa: B007
                 new = env.frames if not rule_frames else env.frames[1:]
-                rule_frames += [rule_schema.extract(f) for f in new]
-                mem_frames += [scorer.schema.extract(f) for f in new]
-            marines.append(int(info["marines"]))
+                rule_frames += [judge.rule_schema.extract(f) for f in new]
+                mem_frames += [judge.scorer.schema.extract(f) for f in new]
+            seen.marines.append(int(info["marines"]))
             steps = np.arange(len(rule_frames) - 1)
             if not len(steps):
                 continue
             fired, matched = judge(rule_frames, mem_frames, steps, steps + 1)
-            fired_all.append(fired)
-            matched_all.append(matched)
-            # This episode's share of the EPIC sample, its frames kept under new indices.
-            k = min(len(steps), -(-EPIC_TRANSITIONS // episodes))
-            m = min(len(rule_frames), -(-EPIC_SUPPORT // episodes))
-            ts = np.sort(pick.choice(steps, k, replace=False))
-            us = np.sort(pick.choice(len(rule_frames), m, replace=False))
-            need = sorted(set(ts.tolist()) | set((ts + 1).tolist()) | set(us.tolist()))
-            index = {f: len(kept_rule) + x for x, f in enumerate(need)}
-            kept_rule += [rule_frames[f] for f in need]
-            kept_mem += [mem_frames[f] for f in need]
-            drawn += [(index[t], index[t + 1]) for t in ts.tolist()]
-            support += [index[u] for u in us.tolist()]
+            seen.fired.append(fired)
+            seen.matched.append(matched)
+            _sample(seen, rule_frames, mem_frames, steps, pick=pick, episodes=episodes)
     finally:
         env.close()
-    fired = np.concatenate(fired_all) if fired_all else np.zeros((0, n), bool)
-    matched = np.concatenate(matched_all) if matched_all else np.zeros((0, n), bool)
+    return seen
+
+
+def _sample(seen: _Seen, rule_frames: list[Any], mem_frames: list[Any], steps: np.ndarray, *,
+            pick: np.random.Generator, episodes: int) -> None:
+    """This episode's share of the EPIC sample, its frames kept under new indices."""
+    k = min(len(steps), -(-EPIC_TRANSITIONS // episodes))
+    m = min(len(rule_frames), -(-EPIC_SUPPORT // episodes))
+    ts = np.sort(pick.choice(steps, k, replace=False))
+    us = np.sort(pick.choice(len(rule_frames), m, replace=False))
+    need = sorted(set(ts.tolist()) | set((ts + 1).tolist()) | set(us.tolist()))
+    index = {f: len(seen.kept_rule) + x for x, f in enumerate(need)}
+    seen.kept_rule += [rule_frames[f] for f in need]
+    seen.kept_mem += [mem_frames[f] for f in need]
+    seen.drawn += [(index[t], index[t + 1]) for t in ts.tolist()]
+    seen.support += [index[u] for u in us.tolist()]
+
+
+def _result(judge: _Judge, fired: np.ndarray, matched: np.ndarray, *, epic: float | None,
+            seen: _Seen, cfg: Any, head: dict[str, Any]) -> dict[str, Any]:
+    """``agreement.json``: ``head``, then per command and over all stacks."""
     tp, fp, fn = ((fired & matched).sum(0), (~fired & matched).sum(0),
                   (fired & ~matched).sum(0))
     none = ~fired.any(1)
-
-    def both(i: np.ndarray, j: np.ndarray) -> np.ndarray:
-        f, m = judge(kept_rule, kept_mem, i, j)
-        return np.stack([f.sum(1), m.sum(1)], axis=1).astype(float)
-
-    epic = None
-    if drawn:
-        s, s2 = (np.array(x) for x in zip(*drawn))
-        epic = epic_distance(both, s, s2, np.array(support), cfg.gamma)
     per = {i: {"text": t, "rule_fired": int(fired[:, k].sum()),
                "mem_matched": int(tp[k] + fp[k]), "tp": int(tp[k]), "fp": int(fp[k]),
                "fn": int(fn[k]), "precision": _ratio(int(tp[k]), int(tp[k] + fp[k])),
                "recall": _ratio(int(tp[k]), int(tp[k] + fn[k])),
                "f1": _f1(int(tp[k]), int(fp[k]), int(fn[k])),
                "pearson": pearson(fired[:, k], matched[:, k])}
-           for k, (i, t) in enumerate(zip(ids, texts))}
-    result = {"run": str(run), "mem": str(mem), "episodes": episodes,
-              "seeds": [AGREEMENT_SEED + e for e in range(episodes)],
-              "deterministic": deterministic, "threshold": limit, "stacks": int(len(fired)),
-              "marines": marines, "commands": per, "null_stacks": int(none.sum()),
-              "null_unmatched": _ratio(int((none & ~matched.any(1)).sum()), int(none.sum())),
-              "reward": {"pearson": pearson(fired.sum(1), matched.sum(1)), "epic": epic,
-                         "gamma": cfg.gamma, "epic_transitions": len(drawn),
-                         "epic_support": len(support)},
-              "config": cfg.identity()}
-    path = out or run / "agreement.json"
-    write_atomic(path, (json.dumps(result, indent=1) + "\n").encode())
-    return result
+           for k, (i, t) in enumerate(zip(judge.ids, judge.texts))}
+    return {**head, "stacks": int(len(fired)),
+            "marines": seen.marines, "commands": per, "null_stacks": int(none.sum()),
+            "null_unmatched": _ratio(int((none & ~matched.any(1)).sum()), int(none.sum())),
+            "reward": {"pearson": pearson(fired.sum(1), matched.sum(1)), "epic": epic,
+                       "gamma": cfg.gamma, "epic_transitions": len(seen.drawn),
+                       "epic_support": len(seen.support)},
+            "config": cfg.identity()}
 
 
 def summary(result: dict[str, Any]) -> list[str]:

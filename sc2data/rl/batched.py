@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from sc2data.errors import Sc2DataError
+from sc2data.ground.errors import Sc2DataError
 from sc2data.rl.narration import Narration
 from sc2data.rulebase import schema_for
 from sc2data.schema import Schema, StackBatch

@@ -32,8 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from sc2data.errors import MissingDependencyError, Sc2DataError
-from sc2data.files import write_atomic
+from sc2data.ground.errors import MissingDependencyError, Sc2DataError
+from sc2data.ground.files import write_atomic
 
 MODES: tuple[str, ...] = ("sampled", "argmax")
 CONFIDENCE = 0.95
@@ -337,7 +337,7 @@ def _figure(record: dict[str, Any], window: int) -> bytes:
     for name, ref in (record.get("reference") or {}).items():
         if name.startswith("uniform-") and ref["space"] != record["action_space"]:
             continue
-        for ax, draw in ((left, left.axhline), (right, right.axvline)):
+        for draw in (left.axhline, right.axvline):
             draw(ref["mean"], color="0.4", lw=1, ls=":" if name.startswith("uniform") else "--")
         left.annotate(f"{name} {ref['mean']:.1f}", (0.99, ref["mean"]),
                       xycoords=("axes fraction", "data"), fontsize=7, color="0.3", va="bottom",

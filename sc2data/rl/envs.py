@@ -32,9 +32,10 @@ the paper space it is pysc2's ``available_actions`` over :data:`PAPER_FUNCTIONS`
 64 x and all 64 y values (MultiDiscrete masks are per-dimension masks laid end to end). For the
 macro space it is what the observation says can be started now: free supply, the units the
 macro selects, free ground for a building, a completed depot for a barracks, an idle worker to
-send (minerals are waited for, not masked). A call that is unavailable is never sent: a masked-out action (from an agent that
-ignores the mask) plays ``no_op`` instead, with ``info["invalid"] = True``, and a macro whose next
-call turns out unavailable (say, a barracks still under construction cannot train) ends there.
+send (minerals are waited for, not masked). A call that is unavailable is never sent: a
+masked-out action (from an agent that ignores the mask) plays ``no_op`` instead, with
+``info["invalid"] = True``, and a macro whose next call turns out unavailable (say, a barracks
+still under construction cannot train) ends there.
 
 Observations (:mod:`sc2data.rl.obs`): ``obs="stored"`` (the default here) is a ``Dict`` with one
 ``Box`` per key of the schema (``Schema.named(layers)``, the paper's 13 screen + 7 minimap
@@ -61,12 +62,12 @@ import numpy as np
 from gymnasium import spaces
 
 from sc2data._pysc2 import actions, features, units
-from sc2data.errors import Sc2DataError
 from sc2data.game.agents import ReducedRandomAgent
 from sc2data.game.env import make_env
 from sc2data.game.screen import ScreenView
-from sc2data.rl.obs import Observer, ObsConfig
-from sc2data.vocab import SCREEN_SIZE, STEP_MUL
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.vocab import SCREEN_SIZE, STEP_MUL
+from sc2data.rl.obs import ObsConfig, Observer
 
 ACTION_SPACES: tuple[str, ...] = ("macro", "paper")
 

@@ -31,11 +31,23 @@ from typing import Any
 
 import numpy as np
 
-from sc2data.errors import Sc2DataError
-from sc2data.files import write_atomic
-from sc2data.formats import Shape
-from sc2data.rl.train import (EVAL_SEED, STATE_SHAPE, _read_json, _write_json, game_loops,
-                              load_config, read_config, read_curve, require_rl)
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import write_atomic
+from sc2data.ground.formats import Shape, check_record, loads
+from sc2data.ground.progress import bar
+from sc2data.ground.vocab import STEP_MUL
+from sc2data.rl.runs import CONFIG, EVAL, MODEL, STATE
+from sc2data.rl.train import (
+    EVAL_SEED,
+    STATE_SHAPE,
+    _read_json,
+    _write_json,
+    game_loops,
+    load_config,
+    read_config,
+    read_curve,
+    require_rl,
+)
 
 PROTOCOL = 2
 """Version of ``eval.json``: 2 holds sampled and argmax play over seeds of both start sides."""
@@ -57,7 +69,6 @@ REFERENCE_AGENTS: dict[str, str] = {
     "uniform-paper": "paper", "uniform-macro": "macro",
     "reduced-random": "macro", "scripted": "macro"}
 """Reference agents and the action space each plays in."""
-
 
 # -- the episodes -----------------------------------------------------------------------------
 
@@ -170,7 +181,7 @@ def _episodes(policy: Any, env: Any, seeds: Sequence[int], deterministic: bool,
     for seed in seeds:
         policy.set_random_seed(seed)
         info: dict[str, Any] = {}
-        for info in play(policy, env, seed, deterministic):
+        for info in play(policy, env, seed, deterministic):  # noqa: B007  (the last one)
             pass
         marines.append(int(info["marines"]))
         tick()
@@ -184,16 +195,15 @@ def evaluate(run: Path, episodes: int = 10, progress: bool | None = None) -> dic
     if episodes < 1:
         raise Sc2DataError("--episodes must be at least 1")
     cfg = load_config(run)
-    state = _read_json(run / "state.json", STATE_SHAPE) if (run / "state.json").is_file() else {}
+    state = _read_json(run / STATE, STATE_SHAPE) if (run / STATE).is_file() else {}
     import torch
     from sb3_contrib import MaskablePPO
 
-    from sc2data.progress import bar
     from sc2data.rl.envs import BuildMarinesGym
 
     seeds, sides = eval_seeds(episodes)
     torch.set_num_threads(1)
-    model = MaskablePPO.load(run / "model.zip", device="cpu")
+    model = MaskablePPO.load(run / MODEL, device="cpu")
     env = BuildMarinesGym(cfg.action_space, backend=cfg.backend, obs=cfg.obs_config(),
                           game_loops=game_loops(cfg))
     try:
@@ -206,16 +216,14 @@ def evaluate(run: Path, episodes: int = 10, progress: bool | None = None) -> dic
               "argmax": scores(argmax), "trained_timesteps": state.get("timesteps"),
               "trained_env_steps": state.get("env_steps"), "config": cfg.identity(),
               "protocol": PROTOCOL}
-    _write_json(run / "eval.json", result)
+    _write_json(run / EVAL, result)
     return result
 
 
 def read_eval(run: Path) -> dict[str, Any]:
     """``RUN/eval.json`` of this protocol, checked; a one-line error naming the command that
     writes it when it is missing, older, or stale (the model trained on since)."""
-    from sc2data.formats import check_record, loads
-
-    path = run / "eval.json"
+    path = run / EVAL
     redo = f"run sc2data rl evaluate {run}"
     try:
         record = loads(path.read_bytes())
@@ -227,8 +235,8 @@ def read_eval(run: Path) -> dict[str, Any]:
         raise Sc2DataError(f"{path} is from an older evaluation protocol (no sampled and argmax "
                            f"play over both start sides); {redo}")
     check_record(record, EVAL_SHAPE, path, redo)
-    if (run / "state.json").is_file():
-        trained = _read_json(run / "state.json", STATE_SHAPE)["timesteps"]
+    if (run / STATE).is_file():
+        trained = _read_json(run / STATE, STATE_SHAPE)["timesteps"]
         if record.get("trained_timesteps") != trained:
             raise Sc2DataError(f"{path} evaluated the model at {record.get('trained_timesteps')} "
                                f"decisions, it has trained {trained} since; {redo}")
@@ -255,7 +263,6 @@ def _agent_episodes(name: str, seeds: Sequence[int], episode_steps: int | None,
     from sc2data.game.agents import make_agent
     from sc2data.game.agents import play as play_agent
     from sc2data.game.env import make_env
-    from sc2data.vocab import STEP_MUL
 
     kwargs = {"game_loops": episode_steps * STEP_MUL} if episode_steps else {}
     marines = []
@@ -263,7 +270,7 @@ def _agent_episodes(name: str, seeds: Sequence[int], episode_steps: int | None,
         env = make_env("sim", seed=game_seed(seed), **kwargs)
         try:
             ts: Any = None
-            for ts in play_agent(env, make_agent(name, seed=seed)):
+            for ts in play_agent(env, make_agent(name, seed=seed)):  # noqa: B007  (the last)
                 pass
             marines.append(int(np.asarray(ts.observation["score_cumulative"])[0]))
         finally:
@@ -287,9 +294,7 @@ def baselines(out: Path, episodes: int = 10, episode_steps: int | None = None,
     if out.exists() and not out.is_dir():
         raise Sc2DataError(f"{out} is a file; --out takes a folder")
     seeds, sides = eval_seeds(episodes)
-    from sc2data.progress import bar
     from sc2data.rl.envs import BuildMarinesGym
-    from sc2data.vocab import STEP_MUL
 
     record: dict[str, Any] = {"episodes": episodes, "seeds": seeds, "sides": sides,
                               "episode_steps": episode_steps, "backend": "sim",
@@ -317,8 +322,6 @@ def baselines(out: Path, episodes: int = 10, episode_steps: int | None = None,
 
 def read_baselines(path: Path) -> dict[str, Any]:
     """A ``baselines.json`` (or the folder holding one), checked; one-line errors."""
-    from sc2data.formats import check_record, loads
-
     file = path / "baselines.json" if path.is_dir() else path
     redo = f"write one with sc2data rl baselines --out {path}"
     try:
@@ -383,7 +386,7 @@ def plot(runs: Sequence[Path], out: Path, window: int = 10, group: bool = False,
     is told. ``baselines_file``: reference agents as horizontal lines."""
     curves = []
     for run in runs:
-        if not (run / "config.json").is_file():
+        if not (run / CONFIG).is_file():
             raise Sc2DataError(f"{run} is not an sc2data rl run (no config.json)")
         rows = read_curve(run)
         if not rows:

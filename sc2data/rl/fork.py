@@ -17,10 +17,11 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-from sc2data.errors import Sc2DataError
-from sc2data.files import PARTIAL, publish, sha256_file, write_atomic
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import PARTIAL, publish, sha256_file, write_atomic
+from sc2data.rl.runs import CONFIG, CURVE_CSV, CURVE_JSON, MODEL, STATE
 
-COPIED = ("model.zip", "state.json", "curve.csv", "curve.json")
+COPIED = (MODEL, STATE, CURVE_CSV, CURVE_JSON)
 
 
 def fork(run: Path, out: Path, mem: Path) -> dict[str, Any]:
@@ -32,7 +33,7 @@ def fork(run: Path, out: Path, mem: Path) -> dict[str, Any]:
     if cfg.reward != "narration":
         raise Sc2DataError(f"{run} was trained with --reward {cfg.reward}; only a narration run "
                            f"has a MEM to replace")
-    from sc2data.model.reward import load_model
+    from sc2data.model.scorer import load_model
 
     load_model(mem)  # a one-line error unless it is a trained MEM
     if out.exists():
@@ -51,10 +52,10 @@ def fork(run: Path, out: Path, mem: Path) -> dict[str, Any]:
         for name in COPIED:
             if (run / name).is_file():
                 shutil.copy2(run / name, tmp / name)
-        write_atomic(tmp / "config.json",
+        write_atomic(tmp / CONFIG,
                      (json.dumps(config, indent=1, sort_keys=True) + "\n").encode())
         record = {"from_run": str(run), "from_mem": cfg.mem, "mem": str(mem),
-                  "checkpoint_sha256": sha256_file(run / "model.zip")}
+                  "checkpoint_sha256": sha256_file(run / MODEL)}
         write_atomic(tmp / "fork.json", (json.dumps(record, indent=1) + "\n").encode())
         publish(tmp, out)
     except BaseException:

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from sc2data.errors import Sc2DataError
+from sc2data.ground.errors import Sc2DataError
 
 DEFAULT_NARRATION = Path(__file__).with_name("narrations") / "buildmarines.toml"
 """The BuildMarines narration shipped with sc2data."""
@@ -69,7 +69,7 @@ def _from_toml(path: Path, text: str) -> list[str]:
 def check_readable(narration: Narration, scorer: Any) -> None:
     """Refuse a command with a word outside the MEM's vocabulary (the MEM would drop it silently).
 
-    ``scorer`` is a :class:`~sc2data.model.reward.MEMScorer`; a stand-in without ``words`` (a
+    ``scorer`` is a :class:`~sc2data.model.scorer.MEMScorer`; a stand-in without ``words`` (a
     test's fake scorer) is not checked.
     """
     words = getattr(scorer, "words", None)

@@ -34,9 +34,9 @@ import numpy as np
 from gymnasium import spaces
 
 from sc2data._pysc2 import actions, features, units
-from sc2data.errors import Sc2DataError
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.vocab import SCREEN_SIZE
 from sc2data.schema import Schema
-from sc2data.vocab import SCREEN_SIZE
 
 OBSERVATIONS: tuple[str, ...] = ("stored", "compact")
 

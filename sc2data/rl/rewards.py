@@ -30,7 +30,7 @@ import gymnasium as gym
 import numpy as np
 
 from sc2data._pysc2 import features
-from sc2data.errors import Sc2DataError
+from sc2data.ground.errors import Sc2DataError
 from sc2data.rl.narration import Narration, check_readable
 from sc2data.rulebase import Rule, schema_for, stack
 from sc2data.schema import Schema, StackBatch
@@ -200,7 +200,7 @@ class NarrationShaping(_Shaping):
     the narration starts again (it loops). With ``patience`` > 0, a command not matched within
     ``patience`` decisions is skipped (k advances, no bonus); 0 waits for it forever.
 
-    ``scorer`` is a :class:`~sc2data.model.reward.MEMScorer` (``load_model(RUN)``) or anything
+    ``scorer`` is a :class:`~sc2data.model.scorer.MEMScorer` (``load_model(RUN)``) or anything
     with the same ``distance(stacks, text) -> (B,) array`` method and a ``schema``. The command
     embeddings are computed once, at construction (the scorer caches them per text).
     ``info["narration_index"]`` is k after the decision.

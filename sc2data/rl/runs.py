@@ -30,15 +30,16 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from sc2data.errors import Sc2DataError
-from sc2data.files import sha256_file, write_atomic
+from sc2data.ground import resume
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import sha256_file, write_atomic
+from sc2data.ground.formats import Shape, loads
+from sc2data.ground.resume import CONFIG, EVAL, STATE
+from sc2data.model.runs import BEST
 
-__all__ = ["sha256_file"]
-from sc2data.formats import Shape, check_record, loads
+__all__ = ["CONFIG", "EVAL", "STATE", "sha256_file"]
 
-CONFIG = "config.json"
 MODEL = "model.zip"
-STATE = "state.json"
 CURVE_CSV = "curve.csv"
 CURVE_JSON = "curve.json"
 LOGS = "logs"
@@ -60,12 +61,7 @@ def remedy(run: Path) -> str:
 
 def read_record(path: Path, shape: Shape, run: Path) -> dict[str, Any]:
     """A run record, parsed (any depth, one line) and checked to have ``shape``."""
-    try:
-        record = loads(path.read_bytes())
-    except (OSError, ValueError) as e:
-        raise Sc2DataError(f"cannot read {path}: {e}; {remedy(run)}") from None
-    check_record(record, shape, path, remedy(run))
-    return record  # type: ignore[no-any-return]
+    return resume.read_record(path, shape, remedy(run))  # type: ignore[no-any-return]
 
 
 def write_record(path: Path, data: Any) -> None:
@@ -172,6 +168,6 @@ def input_digests(narration: Any, mem: str | None) -> dict[str, str]:
         out["narration_sha256"] = _sha("\n".join(narration.commands).encode())
     if mem is not None:
         path = Path(mem)
-        ckpt = path / "best.pt" if path.is_dir() else path
+        ckpt = path / BEST if path.is_dir() else path
         out["mem_sha256"] = sha256_file(ckpt)
     return out

@@ -35,9 +35,9 @@ from stable_baselines3.common.preprocessing import preprocess_obs
 from torch import nn
 from torch.nn import functional as F
 
+from sc2data.ground.vocab import SCREEN_SIZE
 from sc2data.rl.envs import PAPER_FUNCTIONS
 from sc2data.rl.policy import CompactExtractor
-from sc2data.vocab import SCREEN_SIZE
 
 POINT_FUNCTIONS: tuple[str, ...] = ("select_point", "select_rect", "Build_SupplyDepot_screen",
                                     "Build_Barracks_screen", "Harvest_Gather_screen")

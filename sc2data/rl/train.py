@@ -21,28 +21,27 @@ seeds from ``EVAL_SEED`` on, a range training never uses while ``seed < 900,000`
 from __future__ import annotations
 
 import dataclasses
-import io
-import json
 import math
 import os
 import shutil
 import typing
-from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from sc2data.errors import MissingDependencyError, Sc2DataError
-from sc2data.files import FolderLock, check_out, write_atomic, writing
-from sc2data.formats import Shape, check_record, loads
+from sc2data.ground.errors import MissingDependencyError, Sc2DataError
+from sc2data.ground.files import FolderLock, check_out, writing
+from sc2data.ground.formats import Shape
+from sc2data.ground.progress import bar
+from sc2data.ground.resume import differences, read_record, refusal
+from sc2data.ground.vocab import BACKENDS, LAYER_SETS, STEP_MUL
 from sc2data.rl import runs
 from sc2data.rl.runs import CURVE_FIELDS, STATE_SHAPE  # noqa: F401  (names users import)
 
 EVAL_SEED = 1_000_000
 """First evaluation episode seed (training's seeds stay below it)."""
-
 
 
 def require_rl(purpose: str) -> None:
@@ -57,68 +56,105 @@ def require_rl(purpose: str) -> None:
 
 @dataclass(frozen=True)
 class RLConfig:
-    """Everything that defines a training run (``steps`` and ``progress`` may change on resume)."""
+    """Everything that defines a training run (``steps`` and ``progress`` may change on resume).
+
+    ``sc2data rl train`` takes one option per field (``--batch-size`` for ``batch_size``), its
+    default the field's and its help the docstring under it
+    (:func:`sc2data.cli.cliopts.config_options`): a new field is a new option, with no edit to the
+    command line.
+    """
 
     out: str
+    """Run folder (rerun the same command to resume)."""
     action_space: str = "macro"
+    """macro (6 macro actions) or paper (pysc2 function + screen point)."""
     reward: str = "sparse"
+    """sparse, rules, narration or zero (a control: no reward)."""
     narration: str | None = None
+    """Narration file (TOML or one command per line) [default: the shipped BuildMarines
+    narration]."""
     mem: str | None = None
+    """Trained MEM run (sc2data train --out), for --reward narration."""
     steps: int = 10_000
+    """Decisions to train for, over all envs."""
     envs: int = 16
-    """Games stepped together: one batched policy call and one batched reward per step."""
+    """Games stepped together (one batched policy and reward call per step)."""
     seed: int = 0
+    """Seed of the policy and the environments."""
     bonus: float | None = None
-    """Shaping bonus per rule firing (rules, default 0.1) or per matched command (narration, 1)."""
+    """Shaping bonus: per rule firing (rules) or per matched command (narration) [default: 0.1
+    rules, 1.0 narration]."""
     threshold: float = 0.5
+    """MEM distance below which a command is matched."""
     patience: int = 0
+    """Skip a narration command not matched within this many decisions (0: never)."""
     shaping: str = "event"
-    """How the rules and narration rewards pay their bonus: ``event`` (each firing or match) or
-    ``potential`` (γ·Φ(s') − Φ(s) with the run's ``gamma``; :mod:`sc2data.rl.rewards`)."""
+    """How rules/narration pay their bonus: event (each firing or match) or potential
+    (gamma*phi(s') - phi(s): cannot be farmed)."""
+    # potential: γ·Φ(s') − Φ(s) with the run's gamma (sc2data.rl.rewards).
     episode_steps: int | None = None
-    """pysc2 steps per episode (simulator only); None: the map's 1,800."""
+    """pysc2 steps per episode on the simulator [default: 1800]."""
     rollout: int = 64
-    """PPO rollout length per env (SB3's ``n_steps``)."""
+    """PPO rollout length per env."""
+    # SB3's n_steps.
     batch_size: int = 256
+    """PPO minibatch size."""
     checkpoint_every: int = 2048
+    """Decisions between checkpoints."""
     layers: str = "paper"
+    """Layers of the stored observation (--obs stored): paper (the paper's 13 + 7) or full (all
+    27 + 11)."""
     backend: str = "sim"
+    """The game: sim (the embedded simulator) or sc2 (StarCraft II; needs the game)."""
     obs: str = "compact"
-    """What the policy sees (:mod:`sc2data.rl.obs`): ``compact`` or ``stored``."""
+    """What the policy sees: compact (one-hot unit types, few layers) or stored (the stored
+    schema's layers)."""
+    # sc2data.rl.obs.
     obs_size: int = 32
-    """``compact``: 64 or 32 pixels a side."""
+    """compact: 64 or 32 pixels a side."""
     minimap: bool = False
-    """``compact``: add the minimap's channels."""
+    """compact: add the minimap's channels."""
     processes: int | None = None
-    """Worker processes stepping the games (0: in this process); None: one per core, none for
-    one env. Changes nothing but speed, so it may differ on resume."""
+    """Worker processes stepping the games (0: in this process) [default: one per core; none
+    for one env]."""
+    # Changes nothing but speed, so it may differ on resume.
     device: str = "auto"
-    """Where the policy and the MEM run: ``cpu``, ``cuda`` or ``auto`` (cuda where present)."""
+    """Policy and MEM on cpu, cuda or auto (cuda where a GPU is present)."""
     threads: int | None = None
-    """Torch threads of the learner (policy, MEM, PPO's updates); None: one per core. The
-    games' workers wait while the learner works, so its threads take no core from them: two
-    threads halved an update on this project's 2-core machine (BENCHMARKS.md, "RL at speed")."""
+    """Torch threads of the learner (policy, MEM, updates) [default: one per core]."""
+    # The games' workers wait while the learner works, so its threads take no core from them:
+    # two threads halved an update on this project's 2-core machine (BENCHMARKS.md, "RL at
+    # speed").
     policy: str = "auto"
-    """``spatial`` (the paper space: a point given the function, :mod:`sc2data.rl.spatial`),
-    ``independent`` (SB3's heads: function, x and y apart) or ``auto``: spatial for the paper
-    space on the compact observation, independent otherwise."""
+    """spatial (paper space: the point given the function), independent (SB3's heads) or
+    auto."""
+    # spatial: sc2data.rl.spatial; auto: spatial for the paper space on the compact
+    # observation, independent otherwise.
     gamma: float = 0.99
+    """PPO discount (per pysc2 step with --smdp)."""
     gae_lambda: float = 0.95
+    """GAE lambda."""
     epochs: int = 4
     """PPO epochs over each rollout."""
     ent_coef: float = 0.01
+    """Entropy bonus coefficient."""
     normalize_advantage: bool = False
-    """Advantages normalised per minibatch (SB3's default): with a value function that explains
-    nothing yet, each update is then a full clipped step of noise, and a zero-reward control
-    drifts from its initial policy (tests/rl/test_control.py)."""
+    """Normalise advantages per minibatch (SB3's default; off: a zero-reward control then stays
+    where it started)."""
+    # With a value function that explains nothing yet, each update is then a full clipped step
+    # of noise, and a zero-reward control drifts from its initial policy
+    # (tests/rl/test_control.py).
     target_kl: float | None = 0.05
-    """Stop an update's epochs early once the policy moved this far (approximate KL)."""
+    """Stop an update's epochs once the policy moved this far (0: never)."""
+    # Approximate KL; 0 is kept as None (never).
     smdp: bool = True
-    """Discount a decision of k pysc2 steps by γᵏ (:mod:`sc2data.rl.smdp`); the same as γ in
-    the paper space, where every decision is one step."""
+    """Discount a decision of k pysc2 steps by gamma^k."""
+    # The same as gamma in the paper space, where every decision is one step
+    # (sc2data.rl.smdp).
     tensorboard: bool = False
-    """Also write SB3's log as TensorBoard events (``RUN/logs/<session>/``)."""
+    """Also write SB3's log as TensorBoard events (RUN/logs/<session>/; needs tensorboard)."""
     progress: bool | None = None
+    """Progress bar [default: on a terminal]."""
 
     RESUMABLE = ("steps", "progress", "out", "processes", "device", "threads", "tensorboard")
     LEGACY: typing.ClassVar[dict[str, Any]] = {
@@ -127,6 +163,10 @@ class RLConfig:
         "target_kl": None, "smdp": False, "shaping": "event"}
     """Settings added since runs were first written, as those runs had them: a run folder whose
     ``config.json`` lacks one was trained so."""
+
+    def __post_init__(self) -> None:
+        if self.target_kl == 0:  # 0: never stop early, as None
+            object.__setattr__(self, "target_kl", None)
 
     def obs_config(self) -> Any:
         from sc2data.rl.obs import ObsConfig
@@ -143,14 +183,11 @@ CONFIG_SHAPE: Shape = {name: typing.get_args(hint) or hint for name, hint in
                       if name not in RLConfig.RESUMABLE and name != "LEGACY"}
 """``config.json``: :meth:`RLConfig.identity`, every field of its type."""
 
-
 def check_values(cfg: RLConfig) -> None:
     """One-line error unless every setting of ``cfg`` is one sc2data can run."""
     from sc2data.rl.envs import ACTION_SPACES
-    from sc2data.rl.rewards import REWARDS
-    from sc2data.vocab import BACKENDS, LAYER_SETS
-
     from sc2data.rl.obs import OBSERVATIONS
+    from sc2data.rl.rewards import REWARDS
 
     for name, known in (("action_space", ACTION_SPACES), ("reward", REWARDS),
                         ("layers", LAYER_SETS), ("backend", BACKENDS), ("obs", OBSERVATIONS),
@@ -233,7 +270,7 @@ def check_config(cfg: RLConfig) -> tuple[Any, Any]:
         return None, None
     if cfg.mem is None:
         raise Sc2DataError("--reward narration needs --mem RUN (a trained MEM: sc2data train)")
-    from sc2data.model.reward import load_model
+    from sc2data.model.scorer import load_model
     from sc2data.rl.narration import check_readable, load_narration
 
     narration = load_narration(cfg.narration)
@@ -260,7 +297,6 @@ def make_env(cfg: RLConfig, scorer: Any = None, narration: Any = None) -> Any:
 
 def game_loops(cfg: RLConfig) -> int | None:
     """The episode length in game loops (None: the map's)."""
-    from sc2data.vocab import STEP_MUL
 
     return cfg.episode_steps * STEP_MUL if cfg.episode_steps else None
 
@@ -338,17 +374,8 @@ def _write_json(path: Path, data: Any) -> None:
 def read_config(run: Path) -> dict[str, Any]:
     """A run's ``config.json``, checked; settings added since it was written read as the run
     had them (:attr:`RLConfig.LEGACY`)."""
-    path = run / "config.json"
-    try:
-        record = loads(path.read_bytes())
-    except (OSError, ValueError) as e:
-        raise Sc2DataError(f"cannot read {path}: {e}; delete {run} and train it again, or pick "
-                           f"another --out") from None
-    if isinstance(record, dict):
-        record = {**RLConfig.LEGACY, **record}
-    check_record(record, CONFIG_SHAPE, path, f"delete {run} and train it again, or pick "
-                                             f"another --out")
-    return record  # type: ignore[no-any-return]
+    return read_record(run / runs.CONFIG, CONFIG_SHAPE, runs.remedy(run),  # type: ignore[no-any-return]
+                       defaults=RLConfig.LEGACY)
 
 
 read_curve = runs.read_curve
@@ -397,11 +424,10 @@ def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path
     if (run / runs.CONFIG).is_file():
         old = read_config(run)
         old_inputs = old.pop("inputs", None)
-        if old != cfg.identity():
-            diff = sorted(k for k in set(old) | set(cfg.identity())
-                          if old.get(k) != cfg.identity().get(k))
-            raise Sc2DataError(f"{run} holds a run with other settings ({', '.join(diff)}); "
-                               f"rerun with the same options to resume, or pick another --out")
+        diff = differences(old, cfg.identity())
+        if diff:
+            raise refusal(run, "a run", diff, "rerun with the same options to resume, or pick "
+                          "another --out")
         if old_inputs is not None and old_inputs != identity["inputs"]:
             what = sorted(k.replace("_sha256", "") for k in set(old_inputs) | set(
                 identity["inputs"]) if old_inputs.get(k) != identity["inputs"].get(k))
@@ -419,7 +445,6 @@ def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.logger import configure
 
-    from sc2data.progress import bar
 
     # The learner and the games' workers take turns (a vector step, then the batched reward and
     # policy; PPO's update while the workers wait), so the learner may use every core.
@@ -460,7 +485,7 @@ def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path
                 infos, dones = self.locals["infos"], self.locals["dones"]
                 rewards = self.locals["rewards"]
                 buffer = self.model.rollout_buffer
-                if hasattr(buffer, "record_steps"):  # SMDPRolloutBuffer  # before SB3 adds this step
+                if hasattr(buffer, "record_steps"):  # SMDPRolloutBuffer, before SB3 adds the step
                     buffer.record_steps([int(i.get("env_steps", 1)) for i in infos])
                 for i, info in enumerate(infos):
                     state["env_steps"] += int(info.get("env_steps", 1))
@@ -523,7 +548,7 @@ def summary_line(run: Path, seconds: float | None = None) -> str:
 def load_config(run: Path) -> RLConfig:
     """The settings of a trained run (its ``config.json``), its checkpoint checked by content
     (every reader of a run's model opens it through here)."""
-    if not (run / "config.json").is_file() or not (run / "model.zip").is_file():
+    if not (run / runs.CONFIG).is_file() or not (run / runs.MODEL).is_file():
         raise Sc2DataError(f"{run} is not a trained sc2data rl run (no config.json and "
                            f"model.zip); train one with sc2data rl train --out {run}")
     runs.read_state(run)  # the model (and curve) must be what the last checkpoint recorded

@@ -36,12 +36,12 @@ import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
-from sc2data.errors import Sc2DataError
-from sc2data.files import one_line
 from sc2data.game.agents import ReducedRandomAgent
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import one_line
 from sc2data.rl.arena import Arena, Field
 from sc2data.rl.envs import BuildMarinesGym
-from sc2data.rl.obs import ObsConfig, Observer
+from sc2data.rl.obs import ObsConfig
 from sc2data.schema import Schema
 
 MAX_MACRO_STEPS = ReducedRandomAgent.PATIENCE + 4

@@ -36,16 +36,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from sc2data.errors import MissingDependencyError, Sc2DataError
-from sc2data.files import one_line
-from sc2data.progress import Bar
+from sc2data.ground.errors import MissingDependencyError, Sc2DataError
+from sc2data.ground.files import PARTIAL, one_line
+from sc2data.ground.progress import Bar
+from sc2data.ground.provenance import versions
 from sc2data.scaleout.tasks import Tracker, label_task, rollout_task
 
 if TYPE_CHECKING:  # types only: the stages import this module, not the other way round
     from sc2data.data.rollout import AgentFactory, EnvFactory, RolloutConfig, RolloutSummary
     from sc2data.labels.label import LabelSummary
     from sc2data.labels.remote import Selection
-    from sc2data.labels.source import Unit
+    from sc2data.labels.source import WorkUnit
 
 DEFAULT_RETRIES = 2
 """Extra attempts per task after a worker death, a crashed instance or a hang."""
@@ -158,7 +159,6 @@ _TRACKER: list[Any] = []
 """``[(node id, job id), handle]`` of this driver's tracker. Kept between runs, because starting
 an actor's process takes seconds, and held here, because Ray ends an actor with its last handle."""
 
-
 def _tracker(ray: Any) -> Any:
     """This driver's tracker, emptied."""
     ctx = ray.get_runtime_context()
@@ -207,7 +207,6 @@ class _Task:
     """Attempts of this key before the current submission."""
     max_retries: int = 0
     """Ray's retries for the current submission."""
-
 
 def _outcomes(attempts: list[dict[str, Any]], cancelled: dict[str, str]) -> list[str]:
     """One line per attempt of a finished task: done (the last), or why it ended."""
@@ -363,8 +362,6 @@ class RayShards:
                  env_factory: EnvFactory, agent_factory: AgentFactory, bar: Bar
                  ) -> dict[int, list[dict[str, Any]]]:
         from sc2data.data.dataset import shard_name
-        from sc2data.files import PARTIAL
-        from sc2data.provenance import versions
 
         if not todo:
             return {}
@@ -414,7 +411,7 @@ class RayUnits:
         self.options, self.data, self.selection = options, data, selection
         self.report = ScaleoutReport()
 
-    def __call__(self, todo: Sequence[tuple[Unit, Path]], keys: Sequence[str], batch_size: int,
+    def __call__(self, todo: Sequence[tuple[WorkUnit, Path]], keys: Sequence[str], batch_size: int,
                  bar: Bar) -> None:
         if not todo:
             return
@@ -432,7 +429,8 @@ def label_on_ray(data: str | os.PathLike[str], options: RayOptions, *,
                  rules_dir: Path | str | None = None, batch_size: int = 256,
                  progress: bool | None = None, overwrite: bool = False
                  ) -> tuple[LabelSummary, ScaleoutReport]:
-    """``sc2data label --ray``: :func:`sc2data.labels.label.label_dataset` with units as Ray tasks."""
+    """``sc2data label --ray``: :func:`sc2data.labels.label.label_dataset` with units as Ray
+    tasks."""
     from sc2data.labels.label import label_dataset
 
     options.validate()

@@ -1,5 +1,5 @@
-"""What runs inside a Ray task for :mod:`sc2data.scaleout.driver`: one shard or one label unit, and the
-tracker actor the tasks report to.
+"""What runs inside a Ray task for :mod:`sc2data.scaleout.driver`: one shard or one label unit,
+and the tracker actor the tasks report to.
 
 Each attempt of a task registers with the tracker (where it runs), reports its progress at most
 twice a second, and records why it failed before its exception goes back to Ray; the parent reads
@@ -20,8 +20,9 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from sc2data.errors import Sc2DataError
-from sc2data.files import one_line
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import PARTIAL, fsync_path, one_line
+from sc2data.ground.provenance import versions
 
 _REPORT_EVERY_S = 0.5
 
@@ -72,7 +73,6 @@ def _attempt(tracker: Any, key: str, work: Callable[[Reporter], None],
 
 
 def _check_node(expected: dict[str, str]) -> None:
-    from sc2data.provenance import versions
 
     here = versions()
     if here != expected:
@@ -88,7 +88,6 @@ def rollout_task(config: Any, out: str, i: int, env_factory: Any, agent_factory:
     returns its index rows (``write_shard``'s result) and the task's peak memory."""
     from sc2data.data.dataset import shard_name
     from sc2data.data.rollout import write_shard
-    from sc2data.files import PARTIAL, fsync_path
     from sc2data.game import env as envs
 
     def work(report: Reporter) -> None:

@@ -3,9 +3,10 @@
 The frames look like the real game's where it matters to storage: mostly constant planes (height,
 visibility, creep, power), a base, eight mineral fields, SCVs shuttling between them, buildings
 that appear and grow hit points, marines walking off, a selection that changes, categorical ids
-and uint16 hit points, all drawn by the real screen geometry (24 world units across). They are *not* a game: nothing
-here obeys BuildMarines' rules (that is :mod:`sc2data.game.sim`'s job). :class:`SyntheticEnv` serves
-them through pysc2's ``environment.Base`` so the rollout loop runs on them unchanged.
+and uint16 hit points, all drawn by the real screen geometry (24 world units across). They are
+*not* a game: nothing here obeys BuildMarines' rules (that is :mod:`sc2data.game.sim`'s job).
+:class:`SyntheticEnv` serves them through pysc2's ``environment.Base`` so the rollout loop runs
+on them unchanged.
 """
 
 from __future__ import annotations

@@ -20,7 +20,8 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from sc2data._pysc2 import features, units
-from sc2data.formats import PAIRSET
+from sc2data.ground.formats import PAIRSET
+from sc2data.ground.recipe import Command
 from sc2data.pairs.layout import fingerprint
 from sc2data.pairs.packed import PackedWriter
 from sc2data.schema import Schema, StackBatch
@@ -225,7 +226,6 @@ def write_pairset(out: str | Path, states_per_command: int = 40, null_states: in
         counts[split] = {"pairs": n_pairs, "states": len(members)}
     if any(c.get("train_paraphrases") for c in commands):  # drawn as sc2data pair draws them
         from sc2data.pairs.draw import draw_texts
-        from sc2data.recipe import Command
 
         cmds = [Command(str(c["id"]), str(c["text"]),
                         train_paraphrases=tuple(c.get("train_paraphrases", ())))  # type: ignore

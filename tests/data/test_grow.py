@@ -17,7 +17,7 @@ import pytest
 import sc2data
 from sc2data.data.audit import verify
 from sc2data.data.dataset import INDEX, MANIFEST, read_manifest
-from sc2data.errors import Sc2DataError
+from sc2data.ground.errors import Sc2DataError
 from tests.cli import assert_one_line_error, run_cli
 from tests.synthetic_data import as_format, make_dataset
 

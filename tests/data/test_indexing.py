@@ -68,7 +68,7 @@ def test_a_shard_from_another_dataset_is_refused_when_read(tmp_path) -> None:  #
     import pyarrow.parquet as pq
 
     from sc2data.data.dataset import INDEX, write_index
-    from sc2data.errors import Sc2DataError
+    from sc2data.ground.errors import Sc2DataError
 
     def make(out, seed):  # type: ignore[no-untyped-def]
         rollout(RolloutConfig(episodes=2, max_steps=7, episodes_per_shard=1, seed=seed), out,

@@ -19,7 +19,7 @@ from sc2data.cli import main
 from sc2data.data.audit import verify
 from sc2data.data.dataset import INDEX, MANIFEST
 from sc2data.data.rollout import RolloutConfig, episode_seeds, rollout
-from sc2data.errors import Sc2DataError
+from sc2data.ground.errors import Sc2DataError
 from sc2data.testing.synthetic import synthetic_env_factory
 from tests.synthetic_data import config, make_dataset
 

@@ -25,7 +25,7 @@ from sc2data.data.shards import (
     flatten_args,
     function_call,
 )
-from sc2data.errors import Sc2DataError
+from sc2data.ground.errors import Sc2DataError
 from sc2data.schema import Schema, StackBatch
 from sc2data.testing.synthetic import synthetic_episode
 from tests.synthetic_data import STEPS, make_dataset

@@ -12,7 +12,7 @@ torch = pytest.importorskip("torch")
 
 from sc2data.data.dataset import open_dataset  # noqa: E402
 from sc2data.data.torchdata import StackDataset  # noqa: E402
-from sc2data.errors import Sc2DataError  # noqa: E402
+from sc2data.ground.errors import Sc2DataError  # noqa: E402
 from tests.synthetic_data import make_dataset  # noqa: E402
 
 

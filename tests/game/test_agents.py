@@ -13,7 +13,6 @@ from sc2data._pysc2 import actions, environment, features, units  # first: pysc2
 from pysc2.agents import base_agent, random_agent  # isort: skip
 from pysc2.env import mock_sc2_env  # isort: skip
 from pysc2.lib import named_array  # isort: skip
-from sc2data.errors import Sc2DataError
 from sc2data.game.agents import (
     AGENTS,
     ReducedRandomAgent,
@@ -23,6 +22,7 @@ from sc2data.game.agents import (
 )
 from sc2data.game.env import interface_format, make_env
 from sc2data.game.screen import ScreenView
+from sc2data.ground.errors import Sc2DataError
 
 _F, _S, _P = actions.FUNCTIONS, features.SCREEN_FEATURES, features.Player
 T = units.Terran

@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sc2data.errors import Sc2DataError
 from sc2data.game.env import make_env
-from sc2data.vocab import BACKENDS
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.vocab import BACKENDS
 
 SC2DATA = Path(sys.executable).with_name("sc2data")
 

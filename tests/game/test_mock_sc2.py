@@ -27,8 +27,8 @@ def mock_sc2(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def test_without_the_variable_sc2_is_refused(monkeypatch: pytest.MonkeyPatch,
                                              tmp_path: Path) -> None:
-    from sc2data.errors import Sc2DataError
     from sc2data.game.env import make_env, sc2_available
+    from sc2data.ground.errors import Sc2DataError
 
     monkeypatch.delenv(MOCK_ENV_VAR, raising=False)
     monkeypatch.setenv("SC2PATH", str(tmp_path))

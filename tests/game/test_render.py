@@ -124,7 +124,8 @@ def test_legend_names_the_ids_present_by_pysc2_name() -> None:
     plane = obs["feature_screen"][_S.unit_type.index]
     entries = legend("screen/unit_type", [plane])
     assert [(e.id, e.name) for e in entries] == [
-        (units.Terran.CommandCenter, "Terran.CommandCenter"), (units.Terran.Marine, "Terran.Marine")]
+        (units.Terran.CommandCenter, "Terran.CommandCenter"),
+        (units.Terran.Marine, "Terran.Marine")]
     cc = np.clip(_S.unit_type.palette[units.Terran.CommandCenter], 0, 255).astype(np.uint8)
     assert entries[0].color == tuple(int(c) for c in cc) and entries[0].frames == (0,)
     relative = legend("screen/player_relative", [obs["feature_screen"][_S.player_relative.index]])

@@ -12,13 +12,13 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from sc2data import files
 from sc2data._pysc2 import units
-from sc2data.errors import Sc2DataError
-from sc2data.files import PARTIAL, FolderLock
+from sc2data.ground import files
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import PARTIAL, FolderLock
 from sc2data.labels.label import PARTS_DIR, label
 from sc2data.labels.registry import Registered, RuleError, load_registry, load_rules_dir
-from sc2data.labels.source import Source, Unit
+from sc2data.labels.source import Source, WorkUnit
 from sc2data.labels.store import LABELS_FILE, STACKS_FILE, SUMS_FILE, read_labels, read_meta
 from sc2data.rulebase import (
     SCREEN_PX_PER_UNIT,
@@ -69,7 +69,7 @@ EXPECTED = {(s, r) for s, r in EVENTS.items()} | {(16, "build_scv"), (16, "train
 
 
 def make_unit(episode: int, calls: list | None = None, fail_at: int | None = None,
-              schema: Schema = Schema.paper()) -> Unit:
+              schema: Schema = Schema.paper()) -> WorkUnit:
     frames = episode_frames(schema)
     pairs = list(zip(frames[:-1], frames[1:]))
 
@@ -84,7 +84,7 @@ def make_unit(episode: int, calls: list | None = None, fail_at: int | None = Non
             steps = np.arange(start + 1, start + 1 + len(batch))
             yield np.full(len(batch), episode), steps, batch
 
-    return Unit(key=f"shard-{episode}", stacks=len(pairs), batches=batches)
+    return WorkUnit(key=f"shard-{episode}", stacks=len(pairs), batches=batches)
 
 
 def source(n: int = 3, **kw) -> Source:  # type: ignore[no-untyped-def]
@@ -231,7 +231,8 @@ def test_failure_keeps_an_older_complete_labels_file(tmp_path: Path) -> None:
     assert read_labels(tmp_path).meta["counts"]["build_scv"] == 6
 
 
-def test_unwritable_folder_and_concurrent_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_unwritable_folder_and_concurrent_runs(tmp_path: Path,
+                                               monkeypatch: pytest.MonkeyPatch) -> None:
     blocker = tmp_path / "a-file"
     blocker.write_text("")
     with pytest.raises(Sc2DataError, match=r"^cannot write labels in .*a-file/data: "):

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from sc2data.errors import Sc2DataError
+from sc2data.ground.errors import Sc2DataError
 from sc2data.labels.registry import RuleError, load_registry, load_rules_dir, parse_ids
 from sc2data.rulebase import blank_frame, set_field, stack
 from tests.cli import exit_code

@@ -11,8 +11,8 @@ import pytest
 from matplotlib import image
 
 from sc2data.data.dataset import open_dataset
-from sc2data.files import PARTIAL
 from sc2data.game.render import SCALE, colorize, empty_tiles, feature, layout, legend, stack_frames
+from sc2data.ground.files import PARTIAL
 from sc2data.labels.store import read_labels
 from sc2data.labels.view import spread
 from sc2data.schema import Schema

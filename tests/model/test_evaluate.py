@@ -14,7 +14,7 @@ import sc2data.model.evaluate as ev  # noqa: E402
 from sc2data import load_model  # noqa: E402
 from sc2data.model.evaluate import accuracy, auc, evaluate, roc_auc  # noqa: E402
 from sc2data.pairs.loader import PairSet  # noqa: E402
-from tests.cli import assert_one_line_error, run_cli
+from tests.cli import assert_one_line_error, run_cli  # noqa: E402
 from tests.mem_helpers import tiny_pairset, train_tiny  # noqa: E402
 
 
@@ -141,7 +141,7 @@ def test_cli_errors_for_missing_run_foreign_schema_and_bad_data(
     assert_one_line_error(code, err, "best.pt is missing, damaged or was replaced")
     import json
 
-    from sc2data.files import sha256_file
+    from sc2data.ground.files import sha256_file
 
     state = json.loads((other / "state.json").read_text())  # as if trained so
     state["sha256"]["best.pt"] = sha256_file(other / "best.pt")
@@ -188,7 +188,7 @@ def test_long_model_commands_write_progress_lines_to_a_log_file(
         monkeypatch: pytest.MonkeyPatch, command: str) -> None:
     """With stderr in a file (capsys: not a terminal), train, evaluate and tsne write whole
     progress lines once their work lasts — never a carriage-return bar."""
-    from sc2data import progress
+    from sc2data.ground import progress
 
     monkeypatch.setattr(progress, "LOG_EVERY_S", 0.0)
     data = json.loads((run / "config.json").read_text())["data"]

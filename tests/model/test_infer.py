@@ -13,7 +13,7 @@ from sc2data import load_model  # noqa: E402
 from sc2data._pysc2 import units  # noqa: E402
 from sc2data.model.infer import _WORDS_FROM, FastStateEncoder, _cell_totals  # noqa: E402
 from sc2data.model.mem import MEM, ModelConfig, conv_for, model_inputs, value_tables  # noqa: E402
-from sc2data.model.reward import MEMScorer  # noqa: E402
+from sc2data.model.scorer import MEMScorer  # noqa: E402
 from sc2data.pairs.loader import PairSet  # noqa: E402
 from sc2data.schema import Schema  # noqa: E402
 from sc2data.testing.synthetic_pairs import stacks  # noqa: E402

@@ -11,7 +11,7 @@ torch = pytest.importorskip("torch")
 
 from sc2data import load_model  # noqa: E402
 from sc2data._pysc2 import units  # noqa: E402
-from sc2data.errors import Sc2DataError  # noqa: E402
+from sc2data.ground.errors import Sc2DataError  # noqa: E402
 from sc2data.model.mem import (  # noqa: E402
     MEM,
     ModelConfig,
@@ -20,7 +20,7 @@ from sc2data.model.mem import (  # noqa: E402
     to_tensors,
     value_tables,
 )
-from sc2data.model.reward import MEMScorer  # noqa: E402
+from sc2data.model.scorer import MEMScorer  # noqa: E402
 from sc2data.schema import Schema  # noqa: E402
 from sc2data.testing.synthetic_pairs import stacks  # noqa: E402
 from tests.mem_helpers import SMALL_SCHEMA  # noqa: E402
@@ -275,6 +275,6 @@ def test_the_scorer_refuses_inputs_it_cannot_score(tmp_path: Path) -> None:
         "text-vector": (bad("player", good["player"].astype(str)), r"player holds <U\d+ values"),
         "batch": (bad("player", good["player"][:2]), r"disagree on the batch size"),
     }
-    for name, (arrays, message) in cases.items():
+    for arrays, message in cases.values():
         with pytest.raises(Sc2DataError, match=message):
             s.distance(arrays, "build a depot")

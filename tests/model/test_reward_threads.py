@@ -11,7 +11,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from sc2data import load_model  # noqa: E402
-from sc2data.errors import Sc2DataError  # noqa: E402
+from sc2data.ground.errors import Sc2DataError  # noqa: E402
 from sc2data.testing.synthetic_pairs import stacks  # noqa: E402
 from tests.mem_helpers import SMALL_SCHEMA, tiny_pairset, train_tiny  # noqa: E402
 

@@ -12,8 +12,8 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from sc2data.errors import MissingDependencyError, Sc2DataError  # noqa: E402
-from sc2data.model.reward import load_model  # noqa: E402
+from sc2data.ground.errors import MissingDependencyError, Sc2DataError  # noqa: E402
+from sc2data.model.scorer import load_model  # noqa: E402
 from sc2data.pairs.loader import PairSet  # noqa: E402
 from sc2data.testing.synthetic_pairs import COMMANDS  # noqa: E402
 from tests.cli import assert_one_line_error, run_cli  # noqa: E402

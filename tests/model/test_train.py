@@ -14,7 +14,7 @@ import pytest
 pytest.importorskip("torch")
 
 import sc2data.pairs.loader as loader_mod  # noqa: E402
-from sc2data.errors import Sc2DataError  # noqa: E402
+from sc2data.ground.errors import Sc2DataError  # noqa: E402
 from sc2data.model.evaluate import evaluate  # noqa: E402
 from sc2data.pairs.layout import fingerprint
 from sc2data.pairs.loader import PairLoader, PairSet  # noqa: E402
@@ -313,8 +313,8 @@ def test_damaged_checkpoint_is_refused(data: Path, tmp_path: Path) -> None:
 
 def test_two_trains_into_one_folder_do_not_mix(data: Path, tmp_path: Path,
                                                monkeypatch: pytest.MonkeyPatch) -> None:
-    from sc2data import files
-    from sc2data.files import FolderLock
+    from sc2data.ground import files
+    from sc2data.ground.files import FolderLock
 
     monkeypatch.setattr(files, "LOCK_WAIT_S", 0.2)
     (tmp_path / "run").mkdir()

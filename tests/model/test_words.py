@@ -9,7 +9,7 @@ import pytest
 
 pytest.importorskip("gensim")
 
-from sc2data.errors import Sc2DataError
+from sc2data.ground.errors import Sc2DataError
 from sc2data.model.words import WordVectors, load_word_vectors, tokens
 
 WORDS = ["the", "build", "a", "supply", "depot", "Barracks", "train", "marine", "scv", "42"]

@@ -9,8 +9,8 @@ from typing import Any
 import numpy as np
 import pytest
 
+from sc2data.ground.recipe import parse
 from sc2data.pairs.draw import MARGIN, Labelled, NotEnoughStates, apportion, build_pairs
-from sc2data.recipe import parse
 from tests.test_recipe import BASE
 
 RATES = np.array([0.05, 0.03])  # fire rates of build_scv, train_marine
@@ -35,7 +35,8 @@ def recipe(**changes: Any) -> Any:
     ((10, (0.5, 0.25, 0.25)), [5, 3, 2]), ((150000, (2 / 3, 1 / 6, 1 / 6)), [100000, 25000, 25000]),
     ((1, (0.6, 0.2, 0.2)), [1, 0, 0]),
 ])
-def test_apportion_is_exact(apportion_in: tuple[int, tuple[float, ...]], expected: list[int]) -> None:
+def test_apportion_is_exact(apportion_in: tuple[int, tuple[float, ...]],
+                            expected: list[int]) -> None:
     assert apportion(*apportion_in) == expected
 
 

@@ -16,9 +16,9 @@ import pyarrow.parquet as pq
 import pytest
 
 from sc2data.data.dataset import open_dataset
-from sc2data.errors import Sc2DataError
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.vocab import SPLITS
 from sc2data.pairs.packed import PackedSplit
-from sc2data.vocab import SPLITS
 from tests.cli import assert_one_line_error, exit_code, run_cli
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -75,7 +75,8 @@ def test_rerun_build_resumes_without_redoing(built: Path, tmp_path: Path) -> Non
     before = (built / "pairs" / "pairset.json").stat().st_mtime_ns
     p = run("build", recipe, "--out", built, "--no-progress")
     assert "0 shards written, 1 kept" in p.stdout
-    assert "up to date" in p.stdout or (built / "pairs" / "pairset.json").stat().st_mtime_ns == before
+    assert ("up to date" in p.stdout
+            or (built / "pairs" / "pairset.json").stat().st_mtime_ns == before)
 
 
 def test_packed_stacks_equal_the_rollout(built: Path) -> None:
@@ -104,7 +105,8 @@ def test_pair_is_deterministic_and_up_to_date(built: Path, tmp_path: Path) -> No
 def test_other_seed_other_pairs(built: Path, tmp_path: Path) -> None:
     recipe = recipe_file(tmp_path, seed="5", episodes="3", states_per_command="3",
                          null_states="12")
-    shutil.copytree(built / "rollout", tmp_path / "data")  # the seed is the recipe's, not the data's
+    # the seed is the recipe's, not the data's
+    shutil.copytree(built / "rollout", tmp_path / "data")
     run("pair", recipe, "--data", tmp_path / "data", "--out", tmp_path / "b", "--no-progress")
     b = pq.read_table(tmp_path / "b" / "pairs.parquet")
     assert not b.equals(pq.read_table(built / "pairs" / "pairs.parquet"))
@@ -203,8 +205,8 @@ def test_pair_names_a_command_the_labels_lack(built: Path, tmp_path: Path) -> No
 
 def test_recipe_text_must_be_the_rules_command(tmp_path: Path) -> None:
     """labels.parquet records the rule's command, pairs.parquet the recipe's text: they agree."""
+    from sc2data.ground.recipe import parse
     from sc2data.pairs.pairset import check_texts
-    from sc2data.recipe import parse
 
     recipe = parse(tomllib.loads(RECIPE.replace('text = "train a marine"',
                                                 'text = "train a trooper"')), "t.toml")

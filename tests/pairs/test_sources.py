@@ -13,12 +13,12 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pytest
 
+from sc2data.ground.recipe import RecipeError, apportion, parse
+from sc2data.ground.vocab import SPLITS
 from sc2data.pairs import pairset
 from sc2data.pairs.draw import Labelled, NotEnoughStates, build_pairs
-from sc2data.recipe import RecipeError, apportion, parse
 from sc2data.rulebase import schema_for
 from sc2data.schema import StackBatch
-from sc2data.vocab import SPLITS
 
 ROOT = Path(__file__).resolve().parents[2]
 ONE_SOURCE_DIGEST = "2828fe844ab1c70efbc48dca121217ba126a55558f6bfab39a0eb371c550b2cd"

@@ -46,7 +46,7 @@ def test_a_pair_set_changed_after_opening_is_rechecked_before_a_read(tmp_path: P
     import pickle
     import shutil
 
-    from sc2data.errors import Sc2DataError
+    from sc2data.ground.errors import Sc2DataError
 
     path = tiny_pairset(tmp_path / "pairs")
     other = tiny_pairset(tmp_path / "other", seed=1)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from sc2data.files import sha256_file
+from sc2data.ground.files import sha256_file
 from tests.cli import assert_one_line_error, run_cli
 
 TINY = ["--steps", "64", "--envs", "1", "--rollout", "32", "--batch-size", "32",

@@ -11,7 +11,7 @@ from gymnasium.utils.env_checker import check_env
 
 import sc2data.rl  # noqa: F401  (registers the ids)
 from sc2data._pysc2 import actions
-from sc2data.errors import Sc2DataError
+from sc2data.ground.errors import Sc2DataError
 from sc2data.rl.envs import MACROS, PAPER_FUNCTIONS, BuildMarinesGym, paper_call
 from sc2data.schema import Schema
 

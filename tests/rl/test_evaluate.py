@@ -9,10 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sc2data.errors import Sc2DataError
+from sc2data.ground.errors import Sc2DataError
 from sc2data.rl.envs import PAPER_FUNCTIONS, BuildMarinesGym
-from sc2data.rl.evaluate import (REFERENCE_AGENTS, UniformPolicy, eval_seeds, game_seed,
-                                 side_of)
+from sc2data.rl.evaluate import REFERENCE_AGENTS, UniformPolicy, eval_seeds, game_seed, side_of
 from sc2data.rl.train import EVAL_SEED
 from tests.cli import assert_one_line_error, run_cli
 

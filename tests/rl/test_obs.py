@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from sc2data._pysc2 import actions, features, units
-from sc2data.errors import Sc2DataError
 from sc2data.game.sim import BuildMarinesEnv
+from sc2data.ground.errors import Sc2DataError
 from sc2data.rl.envs import PAPER_FUNCTIONS, BuildMarinesGym
 from sc2data.rl.obs import UNIT_TYPES, ObsConfig, Observer
 
@@ -102,7 +102,8 @@ def test_the_simulator_draws_what_is_asked_exactly_and_nothing_else() -> None:
     for _ in range(40):
         a = full.step([actions.FUNCTIONS.no_op()])[0]
         b = part.step([actions.FUNCTIONS.no_op()])[0]
-    sa, sb = np.asarray(a.observation["feature_screen"]), np.asarray(b.observation["feature_screen"])
+    sa = np.asarray(a.observation["feature_screen"])
+    sb = np.asarray(b.observation["feature_screen"])
     drawn = {k.split("/")[1] for k in asked} | set(ENV_SCREEN) | {
         "height_map", "visibility_map", "pathable"}
     for f in S:

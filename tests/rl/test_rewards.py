@@ -11,7 +11,7 @@ import pytest
 from gymnasium import spaces
 
 from sc2data._pysc2 import features
-from sc2data.errors import Sc2DataError
+from sc2data.ground.errors import Sc2DataError
 from sc2data.rl.narration import Narration, load_narration
 from sc2data.rl.rewards import NarrationShaping, RuleShaping, SparseReward, wrap_reward
 from sc2data.rulebase import blank_frame, set_field

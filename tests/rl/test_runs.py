@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from sc2data.files import FolderLock
+from sc2data.ground.files import FolderLock
 from sc2data.rl import runs
 from tests.cli import assert_one_line_error, run_cli
 from tests.mem_helpers import tiny_pairset, train_tiny

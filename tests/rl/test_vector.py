@@ -15,12 +15,11 @@ import numpy as np
 import pytest
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from sc2data.errors import Sc2DataError
+from sc2data.ground.errors import Sc2DataError
 from sc2data.rl import arena
 from sc2data.rl.batched import make_shaping
 from sc2data.rl.envs import PAPER_FUNCTIONS
-from sc2data.rl.train import (RLConfig, check_config, make_env, make_vec_env, policy_kwargs,
-                              train)
+from sc2data.rl.train import RLConfig, check_config, make_env, make_vec_env, policy_kwargs, train
 from sc2data.rl.vector import BuildMarinesVecEnv, BuildMarinesVectorEnv, GameConfig
 from tests.mem_helpers import tiny_pairset, train_tiny
 

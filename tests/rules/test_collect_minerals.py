@@ -1,4 +1,5 @@
-"""collect_minerals on hand-built frames: an idle SCV back to work fires; deaths and idling don't."""
+"""collect_minerals on hand-built frames: an idle SCV back to work fires; deaths and idling
+don't."""
 
 from __future__ import annotations
 

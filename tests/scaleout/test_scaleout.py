@@ -1,6 +1,7 @@
-"""Rollout and label as Ray tasks (``sc2data.scaleout.driver``) on a local 2-CPU Ray instance: the same
-data as a local run, workers killed mid-episode, hung and crashed instances, the retry budget,
-resume, a full disk, the CLI joining a running cluster, and ``--ray`` without Ray installed."""
+"""Rollout and label as Ray tasks (``sc2data.scaleout.driver``) on a local 2-CPU Ray instance:
+the same data as a local run, workers killed mid-episode, hung and crashed instances, the retry
+budget, resume, a full disk, the CLI joining a running cluster, and ``--ray`` without Ray
+installed."""
 
 from __future__ import annotations
 
@@ -23,8 +24,8 @@ import sc2data
 from sc2data.data.audit import verify
 from sc2data.data.dataset import INDEX
 from sc2data.data.rollout import RolloutConfig, _make_agent, episode_seeds, rollout
-from sc2data.errors import Sc2DataError
-from sc2data.files import sha256_file
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import sha256_file
 from sc2data.labels.label import label_dataset
 from sc2data.labels.store import LABELS_FILE, STACKS_FILE, SUMS_FILE
 from sc2data.scaleout.driver import RayOptions, label_on_ray, rollout_on_ray

@@ -22,7 +22,7 @@ from sc2data.game.sim.commands import Commands
 from sc2data.game.sim.game import Game
 from sc2data.game.sim.observe import Renderer
 from sc2data.game.sim.store import Event
-from sc2data.vocab import MAP_NAME, STEP_MUL
+from sc2data.ground.vocab import MAP_NAME, STEP_MUL
 
 
 class BuildMarinesEnv(environment.Base):

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sc2data._pysc2 import units
-from sc2data.vocab import MINIMAP_SIZE, SCREEN_SIZE
+from sc2data.ground.vocab import MINIMAP_SIZE, SCREEN_SIZE
 
 # --- Map geometry (BuildMarines.SC2Map: MapScript.galaxy, Objects, Regions) -------------------------------------------
 

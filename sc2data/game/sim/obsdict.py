@@ -17,7 +17,7 @@ from sc2data.game.sim import mapdata as md
 from sc2data.game.sim.commands import Commands
 from sc2data.game.sim.game import Game
 from sc2data.game.sim.store import PLAYER_SELF, Unit
-from sc2data.vocab import MAP_NAME
+from sc2data.ground.vocab import MAP_NAME
 
 named_array = features.named_array
 """pysc2's ``named_array`` module (``NamedDict``, ``NamedNumpyArray``), as ``features`` uses it."""

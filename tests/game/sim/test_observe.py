@@ -1,4 +1,5 @@
-"""Feature layers drawn by their pysc2 meaning (blob sizes as measured on real 64×64 observations)."""
+"""Feature layers drawn by their pysc2 meaning (blob sizes as measured on real 64×64
+observations)."""
 
 from __future__ import annotations
 

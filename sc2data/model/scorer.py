@@ -21,7 +21,7 @@ threads against 11 ms on one (setting the threads and back costs ~0.3 ms of that
 What comes in is checked as the CLI checks it: a checkpoint by content when it loads (see
 :func:`load_model`), and the stacks on every call — every key the model reads, with the shape and
 an integer dtype per layer, ids within each layer's range, and finite vectors — so that a bad input
-is a :class:`~sc2data.errors.Sc2DataError` naming it, never a NaN or silently wrong distance.
+is a :class:`~sc2data.ground.errors.Sc2DataError` naming it, never a NaN or silently wrong distance.
 """
 
 from __future__ import annotations
@@ -34,7 +34,8 @@ from typing import Any
 
 import numpy as np
 
-from sc2data.errors import MissingDependencyError, Sc2DataError
+from sc2data.ground.errors import MissingDependencyError, Sc2DataError
+from sc2data.model.runs import BEST, CHECKPOINTS, CONFIG, STATE
 from sc2data.schema import Schema, StackBatch
 
 
@@ -242,13 +243,13 @@ def load_model(run: str | os.PathLike[str], device: str = "cpu", fast: bool = Tr
         from sc2data.model.train import check_run
 
         check_run(path, allow_unfinished=allow_unfinished)
-        path = path / "best.pt"
+        path = path / BEST
     else:
         _check_file(path, allow_unfinished)
     dev = resolve_device(device)
     model, meta = load_checkpoint(path, dev)
     _check_finite(model, path)
-    if "config" not in meta and (path.parent / "config.json").is_file():
+    if "config" not in meta and (path.parent / CONFIG).is_file():
         from sc2data.model.train import read_config
 
         meta["config"] = read_config(path.parent)
@@ -260,9 +261,9 @@ def _check_file(path: Path, allow_unfinished: bool) -> None:
     should: ``best.pt``, ``last.pt``), else every record of its archive through its CRC-32."""
     import zipfile
 
-    from sc2data.model.train import CHECKPOINTS, STATE_FILE, check_run, read_state
+    from sc2data.model.train import check_run, read_state
 
-    state = read_state(path.parent) if (path.parent / STATE_FILE).is_file() else None
+    state = read_state(path.parent) if (path.parent / STATE).is_file() else None
     if state is not None and (path.name in state["sha256"] or path.name in CHECKPOINTS):
         check_run(path.parent, allow_unfinished=allow_unfinished, files=(path.name,))
         return

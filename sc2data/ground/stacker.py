@@ -2,7 +2,8 @@
 
 A dataset stores stacks (previous frame, current frame); an agent playing live sees one
 observation per step. :class:`Stacker` keeps the previous frame and turns each new observation
-into a one-stack :class:`~sc2data.schema.StackBatch`, exactly as the rollout writer pairs frames::
+into a one-stack :class:`~sc2data.schema.StackBatch`, exactly as the rollout writer pairs
+frames::
 
     stacker = sc2data.Stacker(mem.schema)
     timestep = env.reset()[0]

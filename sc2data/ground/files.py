@@ -25,7 +25,7 @@ import time
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
-from sc2data.errors import Sc2DataError, reason
+from sc2data.ground.errors import Sc2DataError, reason
 
 PARTIAL = ".partial"
 """Suffix of a file or folder still being written; never a complete result."""

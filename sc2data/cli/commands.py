@@ -13,14 +13,16 @@ from typing import TYPE_CHECKING, Optional
 if TYPE_CHECKING:
     from sc2data.scaleout.driver import RayOptions
 
+from dataclasses import replace
+
 import click
 import typer
 from typer.core import TyperGroup
 
-from sc2data.cliopts import OptionGroup, config_options, option, plural, with_options
-from sc2data.errors import Sc2DataError
-from sc2data.model.train import TrainConfig
-from sc2data.rl.cli import app as rl_app
+from sc2data.cli.cliopts import OptionGroup, config_options, option, plural, with_options
+from sc2data.cli.rl import app as rl_app
+from sc2data.ground.errors import Sc2DataError
+from sc2data.model.train import TrainConfig, train
 
 PIPELINE = ("rollout", "label", "pair", "build", "train", "evaluate", "tsne", "rl", "export",
             "info", "verify", "render", "rules", "version")
@@ -55,7 +57,7 @@ def version_lines() -> list[str]:
     from importlib.metadata import PackageNotFoundError
     from importlib.metadata import version as package_version
 
-    from sc2data.provenance import versions
+    from sc2data.ground.provenance import versions
 
     found = dict(versions())
     for dist in _MORE_VERSIONS:
@@ -100,7 +102,8 @@ _RULES_DIR_HELP = "Also load the rules defined by the .py files of this folder."
 # -- option groups shared by several commands --------------------------------------------------
 @dataclass(frozen=True)
 class RayArgs:
-    """The ``--ray*`` options as given; :meth:`options` checks them once the worker count is known."""
+    """The ``--ray*`` options as given; :meth:`options` checks them once the worker count is
+    known."""
 
     address: str | None
     retries: int
@@ -127,7 +130,8 @@ RAY = OptionGroup("ray", (
              "ray://HOST:PORT joins a running cluster.")),
     option("ray_retries", int, typer.Option(
         2, "--ray-retries",
-        help="With --ray: extra attempts per task after a worker death, a crashed game or a hang.")),
+        help="With --ray: extra attempts per task after a worker death, a crashed game or a "
+             "hang.")),
     option("ray_timeout", float, typer.Option(
         600.0, "--ray-timeout",
         help="With --ray: seconds a task may go without progress before it is retried.")),
@@ -176,22 +180,15 @@ def label(
 ) -> None:
     """Label every stack of DATA with the rules; writes labels.parquet and stack_labels.parquet."""
     from sc2data.folders import expect_dataset
-    from sc2data.labels.label import label_dataset
     from sc2data.labels.registry import parse_ids
+    from sc2data.scaleout.where import run_label
 
     expect_dataset(data)
     selection = {"include": parse_ids(rules), "exclude": parse_ids(exclude) or [],
                  "rules_dir": rules_dir, "batch_size": batch_size, "progress": progress,
                  "overwrite": overwrite}
-    lines: list[str] = []
-    options = ray.options() if ray else None
-    if options is not None:
-        from sc2data.scaleout.driver import label_on_ray
-
-        summary, report = label_on_ray(data, options, **selection)
-        lines = report.lines() if report.tasks else []
-    else:
-        summary = label_dataset(data, workers=workers, **selection)
+    summary, lines = run_label(data, workers=workers, ray=ray.options() if ray else None,
+                               **selection)
     if summary.up_to_date:
         typer.echo("labels are up to date (same rules, same data)")
     typer.echo(summary.table())
@@ -255,7 +252,7 @@ def render(
         if out is None:
             raise Sc2DataError("a live render needs --out PNG")
         from sc2data.game.render import render_episode
-        from sc2data.recipe import RolloutSpec
+        from sc2data.ground.recipe import RolloutSpec
 
         live["agent"] = agent or RolloutSpec.agent  # one default agent: rollout's
         paths = [render_episode(out, **{k: v for k, v in live.items() if v is not None})]
@@ -310,18 +307,15 @@ def rollout(
 
     Into a dataset folder, the settings not given are the folder's: `--out DATA --episodes N`
     grows DATA to N episodes (or finishes an interrupted run)."""
-    from dataclasses import replace
-
     from sc2data.data.rollout import RolloutConfig, folder_config
-    from sc2data.data.rollout import rollout as run
-    from sc2data.errors import Sc2DataError
+    from sc2data.scaleout.where import run_rollout
 
     given = {k: v for k, v in {"env": env, "agent": agent, "episodes": episodes, "seed": seed,
                                "layers": layers}.items() if v is not None}
     extra = {k: v for k, v in {"episodes_per_shard": episodes_per_shard,
                                "max_steps": max_steps}.items() if v is not None}
     if recipe is not None:
-        from sc2data.recipe import load
+        from sc2data.ground.recipe import load
 
         if given:
             raise Sc2DataError(f"--{next(iter(given))} conflicts with --recipe; change the "
@@ -330,15 +324,8 @@ def rollout(
     else:
         base = folder_config(out)
         config = replace(base, **given, **extra) if base else RolloutConfig(**given, **extra)
-    lines: list[str] = []
-    options = ray.options(workers) if ray else None
-    if options is not None:
-        from sc2data.scaleout.driver import rollout_on_ray
-
-        s, report = rollout_on_ray(config, out, options, progress=progress)
-        lines = report.lines() if report.tasks else []
-    else:
-        s = run(config, out, workers=1 if workers is None else workers, progress=progress)
+    s, lines = run_rollout(config, out, workers=1 if workers is None else workers,
+                           progress=progress, ray=ray.options(workers) if ray else None)
     grew = f", grown from {s.grew_from}" if s.grew_from is not None else ""
     typer.echo(f"{s.out}: {plural(s.episodes, 'episode')}{grew}, {plural(s.steps, 'stack')} in "
                f"{s.seconds:.1f} s ({plural(s.shards_written, 'shard')} written, "
@@ -360,8 +347,8 @@ def pair(
 ) -> None:
     """Draw the recipe's matched, mismatched and null pairs; pack the stacks of each split."""
     from sc2data.folders import expect_dataset
+    from sc2data.ground.recipe import load
     from sc2data.pairs.pairset import make_pairset
-    from sc2data.recipe import load
 
     r = load(recipe)
     # A recipe of several sources reads each from a folder inside --data.
@@ -390,7 +377,7 @@ def build(
     """Run a recipe end to end: rollout → label → pair, resuming whatever is already done."""
     from sc2data.build import PAIRS_DIR
     from sc2data.build import build as run
-    from sc2data.recipe import load
+    from sc2data.ground.recipe import load
 
     r = load(recipe)
     options = ray.options(workers) if ray else None
@@ -438,8 +425,6 @@ def verify(folder: Path = typer.Argument(..., metavar="FOLDER", help=_FOLDER_HEL
     flags={"progress": "--progress/--no-progress"}, metavars={"out": "PATH", "vectors": "PATH"}))
 def train_cmd(config: Optional[TrainConfig] = None) -> None:
     """Train the mutual-embedding model; keep the checkpoint of minimum validation loss."""
-    from sc2data.model.train import train
-
     assert config is not None
     typer.echo(f"run: {train(config)}")
 
@@ -462,7 +447,8 @@ def evaluate_cmd(
     """Accuracy (beside the paper's), ROC-AUC, retrieval, phrasings; writes RUN/eval.json."""
     from sc2data.model.evaluate import evaluate, format_report
 
-    report = evaluate(run, data, device, text, allow_unfinished, other_data, progress)
+    report = evaluate(run, data, device=device, texts=text, allow_unfinished=allow_unfinished,
+                      other_data=other_data, progress=progress)
     typer.echo(format_report(report))
     typer.echo(f"wrote {report['written_to']}")
 
@@ -486,7 +472,8 @@ def tsne_cmd(
     """A t-SNE map of state and command embeddings, like the paper's Fig. 3."""
     from sc2data.model.evaluate import tsne
 
-    path = tsne(run, data, out, states, seed, text, device, allow_unfinished, progress)
+    path = tsne(run, data, out=out, states=states, seed=seed, texts=text, device=device,
+                allow_unfinished=allow_unfinished, progress=progress)
     typer.echo(f"wrote {path}")
 
 

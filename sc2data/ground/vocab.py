@@ -17,13 +17,15 @@ STEP_MUL = 8
 """Game loops per agent step: pysc2's default and the paper's."""
 
 EPISODE_STEPS = 1800
-"""Agent steps in one BuildMarines episode: the map's 900 game-second timer × 16 loops / step_mul 8."""
+"""Agent steps in one BuildMarines episode: the map's 900 game-second timer × 16 loops /
+step_mul 8."""
 
 BACKENDS: tuple[str, ...] = ("sim", "sc2")
 """Environment backends: ``sim`` the embedded simulator (default), ``sc2`` the real game."""
 
 LAYER_SETS: tuple[str, ...] = ("paper", "full")
-"""Layer-set presets of :class:`sc2data.schema.Schema`: the paper's 13 + 7 layers, or all 27 + 11."""
+"""Layer-set presets of :class:`sc2data.schema.Schema`: the paper's 13 + 7 layers, or all
+27 + 11."""
 
 SPLITS: tuple[str, ...] = ("train", "val", "test")
 """Pair-set splits, in the order quotas are apportioned and files are listed."""

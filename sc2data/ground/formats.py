@@ -22,8 +22,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from sc2data.errors import Sc2DataError
-from sc2data.vocab import SPLITS
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.vocab import SPLITS
 
 Shape = type | tuple[type, ...] | dict[str, "Shape"] | list["Shape"]
 """What a JSON record must look like: a type or a tuple of types (``int`` never takes a bool,

@@ -20,8 +20,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from sc2data.errors import Sc2DataError
-from sc2data.files import PARTIAL, FolderLock, one_line
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import PARTIAL, FolderLock, one_line
 
 Report = Callable[[int], None]
 """Called by a job with the number of steps played since its last call."""

@@ -1,9 +1,10 @@
 """The ``sc2data`` entry point: every way a command ends is an exit status and at most one line.
 
-User errors (:class:`~sc2data.errors.Sc2DataError`, bad options) print ``sc2data: error: …`` and
-exit 2; Ctrl-C prints ``sc2data: interrupted; …`` and exits 130, wherever it lands:
+User errors (:class:`~sc2data.ground.errors.Sc2DataError`, bad options) print
+``sc2data: error: …`` and exit 2; Ctrl-C prints ``sc2data: interrupted; …`` and exits 130,
+wherever it lands:
 
-* SIGINT is taken over before anything else is imported (the commands, :mod:`sc2data.commands`,
+* SIGINT is taken over before anything else is imported (the commands, :mod:`sc2data.cli.commands`,
   take seconds to import: pysc2, PyTorch), so a Ctrl-C at start-up is handled like any other;
 * the first Ctrl-C raises ``KeyboardInterrupt`` where the command is, so its cleanup runs (workers
   stopped, ``….partial`` files removed); a second one while that runs does not interrupt it
@@ -100,9 +101,9 @@ def _run(argv: list[str]) -> int:
     """Run one command line; its exit status, every message printed."""
     import typer
 
-    from sc2data.cliopts import one_voice
-    from sc2data.commands import app
-    from sc2data.errors import Sc2DataError
+    from sc2data.cli.cliopts import one_voice
+    from sc2data.cli.commands import app
+    from sc2data.ground.errors import Sc2DataError
 
     command = one_voice(typer.main.get_command(app))
     try:

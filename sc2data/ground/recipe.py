@@ -54,8 +54,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from sc2data.errors import Sc2DataError
-from sc2data.vocab import (
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.vocab import (
     BACKENDS,
     LAYER_SETS,
     MISMATCH_METHODS,
@@ -172,7 +172,8 @@ class Recipe:
         return d
 
 
-def _check_keys(where: str, table: Mapping[str, Any], allowed: Mapping[str, type | tuple[type, ...]],
+def _check_keys(where: str, table: Mapping[str, Any],
+                allowed: Mapping[str, type | tuple[type, ...]],
                 required: tuple[str, ...] = ()) -> None:
     for key, value in table.items():
         if key not in allowed:

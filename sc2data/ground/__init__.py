@@ -1,0 +1,1 @@
+"""The shared ground: what every stage builds on (folders, records, formats, errors)."""

@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from sc2data.errors import Sc2DataError
-from sc2data.files import write_atomic
+from sc2data.files import write_atomic, writing
 from sc2data.formats import Shape
 from sc2data.rl.train import (EVAL_SEED, STATE_SHAPE, _read_json, _write_json, game_loops,
                               load_config, read_config, read_curve, require_rl)
@@ -206,7 +206,8 @@ def evaluate(run: Path, episodes: int = 10, progress: bool | None = None) -> dic
               "argmax": scores(argmax), "trained_timesteps": state.get("timesteps"),
               "trained_env_steps": state.get("env_steps"), "config": cfg.identity(),
               "protocol": PROTOCOL}
-    _write_json(run / "eval.json", result)
+    with writing(str(run / "eval.json"), "free some space, then rerun the same command"):
+        _write_json(run / "eval.json", result)
     return result
 
 
@@ -443,6 +444,7 @@ def plot(runs: Sequence[Path], out: Path, window: int = 10, group: bool = False,
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=120)
     plt.close(fig)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    write_atomic(out, buf.getvalue())
+    with writing(str(out), "free some space, then rerun the same command"):
+        out.parent.mkdir(parents=True, exist_ok=True)
+        write_atomic(out, buf.getvalue())
     return out

@@ -137,14 +137,19 @@ def check_model(run: Path, state: dict[str, Any]) -> None:
 
 def commit(run: Path, model: Any, rows: Sequence[dict[str, float]], curve_json: Any,
            state: dict[str, Any]) -> None:
-    """Write a checkpoint as a whole (see the module docstring); ``state`` gains the sha256."""
-    model.save(run / MODEL_PARTIAL)
-    curve = curve_bytes(rows)
-    write_atomic(run / CURVE_PARTIAL, curve)
-    state.update(model_sha256=sha256_file(run / MODEL_PARTIAL), curve_sha256=_sha(curve))
-    write_record(run / STATE_PARTIAL, state)
-    write_record(run / CURVE_JSON, curve_json)  # derived from the same rows, for readers
-    recover(run)
+    """Write a checkpoint as a whole (see the module docstring); ``state`` gains the sha256.
+    A failure part-way (a full disk, Ctrl-C) leaves the previous checkpoint, or this one if its
+    record was written, and no partial file."""
+    try:
+        model.save(run / MODEL_PARTIAL)
+        curve = curve_bytes(rows)
+        write_atomic(run / CURVE_PARTIAL, curve)
+        state.update(model_sha256=sha256_file(run / MODEL_PARTIAL), curve_sha256=_sha(curve))
+        write_record(run / STATE_PARTIAL, state)
+    finally:
+        recover(run)
+    # derived from the committed rows, for readers; a stop before it leaves the last one's
+    write_record(run / CURVE_JSON, curve_json)
 
 
 def read_curve(run: Path) -> list[dict[str, float]]:

@@ -369,8 +369,8 @@ def train(cfg: RLConfig) -> Path:
     begun = (run / runs.CONFIG).is_file()  # an existing run: never forgotten on failure
     run.mkdir(parents=True, exist_ok=True)
     try:
-        with FolderLock(run, "rl train"), writing(f"the run {run}", "free some space, then "
-                                                  "rerun the same command to resume"):
+        with writing(f"the run {run}", "free some space, then rerun the same command to "
+                                       "resume"), FolderLock(run, "rl train"):
             return _train_locked(cfg, run, narration, scorer)
     except BaseException:
         if not begun and not (run / runs.STATE).is_file():

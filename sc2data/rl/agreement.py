@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from sc2data.errors import Sc2DataError
-from sc2data.files import write_atomic
+from sc2data.rl.runs import check_file_out, write_file
 
 AGREEMENT_SEED = 2_000_000
 """First episode seed of an agreement measurement (neither training's nor evaluation's)."""
@@ -118,14 +118,16 @@ def agreement(run: Path, mem: Path, *, episodes: int = 3, deterministic: bool = 
     require_rl("sc2data rl agreement")
     if episodes < 1:
         raise Sc2DataError("--episodes must be at least 1")
+    if out is not None:
+        check_file_out(out)
     cfg = load_config(run)
     import json
 
     import torch
-    from sb3_contrib import MaskablePPO
 
     from sc2data.labels.registry import call, load_registry
     from sc2data.model.reward import load_model
+    from sc2data.rl import runs
     from sc2data.rl.envs import BuildMarinesGym
     from sc2data.rulebase import schema_for, stack
     from sc2data.vocab import STEP_MUL
@@ -155,10 +157,14 @@ def agreement(run: Path, mem: Path, *, episodes: int = 3, deterministic: bool = 
             matched.append(scorer.distances(mb, texts) < limit)
         return np.concatenate(fired), np.concatenate(matched)
 
-    model = MaskablePPO.load(run / "model.zip", device="cpu")
     loops = cfg.episode_steps * STEP_MUL if cfg.episode_steps else None
     env = BuildMarinesGym(cfg.action_space, backend=cfg.backend, obs=cfg.obs_config(),
                           game_loops=loops)
+    try:
+        model = runs.load_model(run, env)
+    except BaseException:
+        env.close()
+        raise
     pick = np.random.default_rng(AGREEMENT_SEED)
     n = len(ids)
     fired_all: list[np.ndarray] = []
@@ -227,7 +233,7 @@ def agreement(run: Path, mem: Path, *, episodes: int = 3, deterministic: bool = 
                          "epic_support": len(support)},
               "config": cfg.identity()}
     path = out or run / "agreement.json"
-    write_atomic(path, (json.dumps(result, indent=1) + "\n").encode())
+    write_file(path, (json.dumps(result, indent=1) + "\n").encode())
     return result
 
 

@@ -32,8 +32,9 @@ from typing import Any
 import numpy as np
 
 from sc2data.errors import Sc2DataError
-from sc2data.files import write_atomic, writing
+from sc2data.files import writing
 from sc2data.formats import Shape
+from sc2data.rl.runs import check_file_out, write_file
 from sc2data.rl.train import (EVAL_SEED, STATE_SHAPE, _read_json, _write_json, game_loops,
                               load_config, read_config, read_curve, require_rl)
 
@@ -186,17 +187,17 @@ def evaluate(run: Path, episodes: int = 10, progress: bool | None = None) -> dic
     cfg = load_config(run)
     state = _read_json(run / "state.json", STATE_SHAPE) if (run / "state.json").is_file() else {}
     import torch
-    from sb3_contrib import MaskablePPO
 
     from sc2data.progress import bar
     from sc2data.rl.envs import BuildMarinesGym
+    from sc2data.rl.runs import load_model
 
     seeds, sides = eval_seeds(episodes)
     torch.set_num_threads(1)
-    model = MaskablePPO.load(run / "model.zip", device="cpu")
     env = BuildMarinesGym(cfg.action_space, backend=cfg.backend, obs=cfg.obs_config(),
                           game_loops=game_loops(cfg))
     try:
+        model = load_model(run, env)
         with bar(2 * episodes, desc="rl evaluate", unit="episode", show=progress) as b:
             sampled = _episodes(model, env, seeds, False, lambda: b.update(1))
             argmax = _episodes(model, env, seeds, True, lambda: b.update(1))
@@ -311,8 +312,9 @@ def baselines(out: Path, episodes: int = 10, episode_steps: int | None = None,
             else:
                 marines = _agent_episodes(name, seeds, episode_steps, lambda: b.update(1))
             record["agents"][name] = {"space": space, **scores(marines)}
-    out.mkdir(parents=True, exist_ok=True)
-    _write_json(out / "baselines.json", record)
+    with writing(str(out / "baselines.json"), "free some space, then rerun the same command"):
+        out.mkdir(parents=True, exist_ok=True)
+        _write_json(out / "baselines.json", record)
     return record
 
 
@@ -382,6 +384,7 @@ def plot(runs: Sequence[Path], out: Path, window: int = 10, group: bool = False,
     to the highest. A run (group) with fewer episodes than ``window`` is drawn as its episodes'
     points (its runs' mean over the episodes all reached), marked so in the legend, and ``say``
     is told. ``baselines_file``: reference agents as horizontal lines."""
+    check_file_out(out)
     curves = []
     for run in runs:
         if not (run / "config.json").is_file():
@@ -444,7 +447,5 @@ def plot(runs: Sequence[Path], out: Path, window: int = 10, group: bool = False,
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=120)
     plt.close(fig)
-    with writing(str(out), "free some space, then rerun the same command"):
-        out.parent.mkdir(parents=True, exist_ok=True)
-        write_atomic(out, buf.getvalue())
+    write_file(out, buf.getvalue())
     return out

@@ -415,7 +415,6 @@ def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path
         return run
 
     import torch
-    from sb3_contrib import MaskablePPO
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.logger import configure
 
@@ -437,7 +436,7 @@ def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path
     vec = make_vec_env(cfg, scorer, narration)
     try:
         if state["timesteps"]:
-            model = MaskablePPO.load(run / runs.MODEL, env=vec, device=device)
+            model = runs.load_model(run, vec, device, attach=True)
             model.set_random_seed(seed)
         else:
             model = new_model(cfg, vec, seed, device)

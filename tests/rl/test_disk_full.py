@@ -111,12 +111,24 @@ def test_tensorboard_events(base: Path, fs: Path) -> None:
     _whole(run, 64, 1)
 
 
-def test_evaluate(base: Path, fs: Path) -> None:
+def test_evaluate_and_compare(base: Path, fs: Path) -> None:
     run = shutil.copytree(base, fs / "run")
     args = ["rl", "evaluate", run, "--episodes", "1", "--no-progress"]
     _fails_when_filling_at("eval.json", fs, *args)
     assert not (run / "eval.json").exists() and not list(run.rglob("*.partial*"))
     assert exit_code(*args) == 0 and (run / "eval.json").is_file()
+    args = ["rl", "compare", run, "--out", fs / "cmp", "--reps", "50"]
+    _fails_when_filling_at("compare.png", fs, *args)
+    assert not list(fs.rglob("*.partial*"))
+    assert exit_code(*args) == 0 and (fs / "cmp" / "compare.png").is_file()
+
+
+def test_baselines(fs: Path) -> None:
+    args = ["rl", "baselines", "--out", fs / "ref", "--episodes", "1", "--episode-steps", "5",
+            "--no-progress"]
+    _fails_when_filling_at("baselines.json", fs, *args)
+    assert not list((fs / "ref").iterdir())
+    assert exit_code(*args) == 0 and (fs / "ref" / "baselines.json").is_file()
 
 
 def test_plot(base: Path, fs: Path) -> None:
@@ -124,3 +136,21 @@ def test_plot(base: Path, fs: Path) -> None:
     _fails_when_filling_at("curve.png", fs, *args)
     assert not list((fs / "plots").iterdir())
     assert exit_code(*args) == 0 and (fs / "plots" / "curve.png").is_file()
+
+
+def test_full_shared_memory_is_one_line(fs: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The games' shared memory on a full ``/dev/shm`` (here, the full tmpfs in its place) is
+    refused when it is made: a sparse file there mapped, and the first write into it killed
+    the process with SIGBUS."""
+    import numpy as np
+
+    from sc2data.errors import Sc2DataError
+    from tests.diskfill import fill
+
+    monkeypatch.setattr(arena, "folder", lambda: fs)
+    fill(fs / "ballast")
+    with pytest.raises(Sc2DataError, match=r"shared memory \(400,000 bytes\) in .*No space left "
+                                           r"on device; free space there, or run with "
+                                           r"--processes 0"):
+        arena.Arena.create([arena.Field("x", (1000, 100), np.dtype(np.float32))])
+    assert [p.name for p in fs.iterdir()] == ["ballast"]

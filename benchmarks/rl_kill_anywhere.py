@@ -13,7 +13,8 @@ games anew, so the resumed part cannot equal an uninterrupted run) is checked ex
   same until the first resume);
 * after the rerun: trained to ``--steps``; the checkpoint agrees with itself and its settings;
   the rows the kill kept are still the curve's first rows; episodes numbered without a gap;
-  ``resumes`` is 1 if the kill left a checkpoint, else 0; ``sc2data verify RUN`` passes;
+  ``resumes`` is 1 if the kill left a checkpoint short of ``--steps``, else 0 (a kill after
+  the last checkpoint leaves a finished run, which the rerun leaves as it is); ``sc2data verify RUN`` passes;
 * no ``*.partial*`` file in the run, no shared-memory file of the killed process, and no process
   of it left.
 
@@ -96,7 +97,8 @@ def check(run: Path, ref_rows: list[dict[str, float]], moment: float, pid: int |
     finish(args)
     state = runs.read_state(run)
     assert state is not None and state["timesteps"] >= 192, state
-    assert state["resumes"] == (1 if kept is not None else 0), (state, kept)
+    resumed = kept is not None and kept["timesteps"] < 192  # else: already trained, kept as is
+    assert state["resumes"] == int(resumed), (state, kept)
     rows = runs.read_curve(run)
     assert rows[:len(kept_rows)] == kept_rows, "the rerun changed the kept rows"
     assert [r["episode"] for r in rows] == list(range(1, len(rows) + 1)) == list(
@@ -115,6 +117,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=20, help="Seeds 1..N.")
     ap.add_argument("--envs", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--only", type=int, nargs="+", help="These seeds alone (a replay).")
     a = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="rl-kill-"))
     refs = {}
@@ -129,7 +132,8 @@ def main() -> int:
         assert same, "training is not reproducible: the curve check below means nothing"
         refs[envs] = (runs.read_curve(ref), duration)
     failed = early = 0
-    for seed in range(1, a.seeds + 1):
+    seeds = a.only or list(range(1, a.seeds + 1))
+    for seed in seeds:
         for envs in a.envs:
             ref_rows, duration = refs[envs]
             moment = random.Random(f"{seed} {envs}").uniform(0.0, duration)
@@ -146,7 +150,7 @@ def main() -> int:
                 failed += 1
                 line = f"FAILED at {moment:.2f} s: {e}"
             print(f"seed {seed:2d} envs {envs}: {line}", flush=True)
-    stops = a.seeds * len(a.envs) - early
+    stops = len(seeds) * len(a.envs) - early
     print(f"{stops - failed} of {stops} stops resumed to a consistent run; {early} runs "
           f"finished before their kill ({tmp})")
     return 1 if failed else 0

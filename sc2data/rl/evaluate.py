@@ -34,7 +34,7 @@ import numpy as np
 from sc2data.errors import Sc2DataError
 from sc2data.files import writing
 from sc2data.formats import Shape
-from sc2data.rl.runs import check_file_out, write_file
+from sc2data.rl.runs import check_file_out, load_model, write_file
 from sc2data.rl.train import (EVAL_SEED, STATE_SHAPE, _read_json, _write_json, game_loops,
                               load_config, read_config, read_curve, require_rl)
 
@@ -190,7 +190,6 @@ def evaluate(run: Path, episodes: int = 10, progress: bool | None = None) -> dic
 
     from sc2data.progress import bar
     from sc2data.rl.envs import BuildMarinesGym
-    from sc2data.rl.runs import load_model
 
     seeds, sides = eval_seeds(episodes)
     torch.set_num_threads(1)

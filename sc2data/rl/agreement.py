@@ -39,9 +39,9 @@ from typing import Any
 import numpy as np
 
 from sc2data.ground.errors import Sc2DataError
-from sc2data.ground.files import write_atomic
 from sc2data.ground.vocab import STEP_MUL
-from sc2data.rl.runs import MODEL
+from sc2data.rl import runs
+from sc2data.rl.runs import check_file_out, write_file
 
 AGREEMENT_SEED = 2_000_000
 """First episode seed of an agreement measurement (neither training's nor evaluation's)."""
@@ -120,6 +120,8 @@ def agreement(run: Path, mem: Path, *, episodes: int = 3, deterministic: bool = 
     require_rl("sc2data rl agreement")
     if episodes < 1:
         raise Sc2DataError("--episodes must be at least 1")
+    if out is not None:
+        check_file_out(out)
     cfg = load_config(run)
     import json
 
@@ -145,7 +147,7 @@ def agreement(run: Path, mem: Path, *, episodes: int = 3, deterministic: bool = 
                            "seeds": [AGREEMENT_SEED + e for e in range(episodes)],
                            "deterministic": deterministic, "threshold": judge.limit})
     path = out or run / "agreement.json"
-    write_atomic(path, (json.dumps(result, indent=1) + "\n").encode())
+    write_file(path, (json.dumps(result, indent=1) + "\n").encode())
     return result
 
 
@@ -213,15 +215,17 @@ class _Seen:
 def _play(run: Path, cfg: Any, judge: _Judge, *, episodes: int, deterministic: bool) -> _Seen:
     """Play the policy's episodes, judge every stack, and draw each episode's share of the EPIC
     sample."""
-    from sb3_contrib import MaskablePPO
-
     from sc2data.rl.envs import BuildMarinesGym
     from sc2data.rl.train import play
 
-    model = MaskablePPO.load(run / MODEL, device="cpu")
     loops = cfg.episode_steps * STEP_MUL if cfg.episode_steps else None
     env = BuildMarinesGym(cfg.action_space, backend=cfg.backend, obs=cfg.obs_config(),
                           game_loops=loops)
+    try:
+        model = runs.load_model(run, env)
+    except BaseException:
+        env.close()
+        raise
     pick = np.random.default_rng(AGREEMENT_SEED)
     seen = _Seen()
     try:

@@ -10,6 +10,7 @@ arena first removes the files of creators that no longer run (:func:`sweep`).
 
 from __future__ import annotations
 
+import errno
 import mmap
 import os
 import secrets
@@ -18,6 +19,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from sc2data.ground.errors import Sc2DataError
 
 PREFIX = "sc2data-rl-"
 _ALIGN = 64
@@ -78,6 +81,22 @@ def sweep(where: Path | None = None) -> list[Path]:
     return removed
 
 
+def _reserve(fd: int, size: int, where: Path) -> None:
+    """Give the file ``size`` bytes of real memory now: a sparse file on a full ``/dev/shm``
+    maps, and then kills every process that writes to it (SIGBUS)."""
+    try:
+        os.posix_fallocate(fd, 0, size)
+    except OSError as e:
+        if e.errno in (errno.EOPNOTSUPP, errno.EINVAL):  # no fallocate there (or size 0)
+            os.ftruncate(fd, size)
+        elif e.errno in (errno.ENOSPC, errno.EDQUOT):
+            raise Sc2DataError(f"cannot make the games' shared memory ({size:,} bytes) in "
+                               f"{where}: {os.strerror(e.errno)}; free space there, or run with "
+                               f"--processes 0 (the games in this process)") from None
+        else:
+            raise
+
+
 class Arena:
     """The arrays of ``fields`` over one mapping (:meth:`create`, :meth:`attach`, or
     :meth:`private` for one process)."""
@@ -100,7 +119,7 @@ class Arena:
         path = where / f"{PREFIX}{os.getpid()}-{secrets.token_hex(4)}"
         fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600)
         try:
-            os.ftruncate(fd, size)
+            _reserve(fd, size, where)
             buf = mmap.mmap(fd, size)
         except BaseException:
             os.close(fd)

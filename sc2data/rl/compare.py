@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from sc2data.ground.errors import MissingDependencyError, Sc2DataError
-from sc2data.ground.files import write_atomic
+from sc2data.ground.files import write_atomic, writing
 
 MODES: tuple[str, ...] = ("sampled", "argmax")
 CONFIDENCE = 0.95
@@ -252,9 +252,10 @@ def compare(runs: Sequence[Path], out: Path | None = None, *, baselines: Path | 
     if out is not None:
         from sc2data.rl.train import _write_json
 
-        out.mkdir(parents=True, exist_ok=True)
-        _write_json(out / "compare.json", record)
-        write_atomic(out / "compare.png", _figure(record, window))
+        with writing(str(out), "free some space, then rerun the same command"):
+            out.mkdir(parents=True, exist_ok=True)
+            _write_json(out / "compare.json", record)
+            write_atomic(out / "compare.png", _figure(record, window))
     return record
 
 

@@ -32,11 +32,11 @@ from typing import Any
 import numpy as np
 
 from sc2data.ground.errors import Sc2DataError
-from sc2data.ground.files import write_atomic
+from sc2data.ground.files import writing
 from sc2data.ground.formats import Shape, check_record, loads
 from sc2data.ground.progress import bar
 from sc2data.ground.vocab import STEP_MUL
-from sc2data.rl.runs import CONFIG, EVAL, MODEL, STATE
+from sc2data.rl.runs import CONFIG, EVAL, STATE, check_file_out, load_model, write_file
 from sc2data.rl.train import (
     EVAL_SEED,
     STATE_SHAPE,
@@ -197,16 +197,15 @@ def evaluate(run: Path, episodes: int = 10, progress: bool | None = None) -> dic
     cfg = load_config(run)
     state = _read_json(run / STATE, STATE_SHAPE) if (run / STATE).is_file() else {}
     import torch
-    from sb3_contrib import MaskablePPO
 
     from sc2data.rl.envs import BuildMarinesGym
 
     seeds, sides = eval_seeds(episodes)
     torch.set_num_threads(1)
-    model = MaskablePPO.load(run / MODEL, device="cpu")
     env = BuildMarinesGym(cfg.action_space, backend=cfg.backend, obs=cfg.obs_config(),
                           game_loops=game_loops(cfg))
     try:
+        model = load_model(run, env)
         with bar(2 * episodes, desc="rl evaluate", unit="episode", show=progress) as b:
             sampled = _episodes(model, env, seeds, False, lambda: b.update(1))
             argmax = _episodes(model, env, seeds, True, lambda: b.update(1))
@@ -216,7 +215,8 @@ def evaluate(run: Path, episodes: int = 10, progress: bool | None = None) -> dic
               "argmax": scores(argmax), "trained_timesteps": state.get("timesteps"),
               "trained_env_steps": state.get("env_steps"), "config": cfg.identity(),
               "protocol": PROTOCOL}
-    _write_json(run / EVAL, result)
+    with writing(str(run / EVAL), "free some space, then rerun the same command"):
+        _write_json(run / EVAL, result)
     return result
 
 
@@ -315,8 +315,9 @@ def baselines(out: Path, episodes: int = 10, episode_steps: int | None = None,
             else:
                 marines = _agent_episodes(name, seeds, episode_steps, lambda: b.update(1))
             record["agents"][name] = {"space": space, **scores(marines)}
-    out.mkdir(parents=True, exist_ok=True)
-    _write_json(out / "baselines.json", record)
+    with writing(str(out / "baselines.json"), "free some space, then rerun the same command"):
+        out.mkdir(parents=True, exist_ok=True)
+        _write_json(out / "baselines.json", record)
     return record
 
 
@@ -384,6 +385,7 @@ def plot(runs: Sequence[Path], out: Path, window: int = 10, group: bool = False,
     to the highest. A run (group) with fewer episodes than ``window`` is drawn as its episodes'
     points (its runs' mean over the episodes all reached), marked so in the legend, and ``say``
     is told. ``baselines_file``: reference agents as horizontal lines."""
+    check_file_out(out)
     curves = []
     for run in runs:
         if not (run / CONFIG).is_file():
@@ -446,6 +448,5 @@ def plot(runs: Sequence[Path], out: Path, window: int = 10, group: bool = False,
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=120)
     plt.close(fig)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    write_atomic(out, buf.getvalue())
+    write_file(out, buf.getvalue())
     return out

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from sc2data.ground.errors import Sc2DataError
-from sc2data.ground.files import PARTIAL, publish, sha256_file, write_atomic
+from sc2data.ground.files import PARTIAL, publish, sha256_file, write_atomic, writing
 from sc2data.rl.runs import CONFIG, CURVE_CSV, CURVE_JSON, MODEL, STATE
 
 COPIED = (MODEL, STATE, CURVE_CSV, CURVE_JSON)
@@ -47,18 +47,19 @@ def fork(run: Path, out: Path, mem: Path) -> dict[str, Any]:
         config["inputs"] = input_digests(load_narration(cfg.narration), str(mem))
     tmp = out.with_name(f".{out.name}{PARTIAL}")
     shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    try:
-        for name in COPIED:
-            if (run / name).is_file():
-                shutil.copy2(run / name, tmp / name)
-        write_atomic(tmp / CONFIG,
-                     (json.dumps(config, indent=1, sort_keys=True) + "\n").encode())
-        record = {"from_run": str(run), "from_mem": cfg.mem, "mem": str(mem),
-                  "checkpoint_sha256": sha256_file(run / MODEL)}
-        write_atomic(tmp / "fork.json", (json.dumps(record, indent=1) + "\n").encode())
-        publish(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+    with writing(str(out), "free some space, then rerun the same command"):
+        tmp.mkdir(parents=True)
+        try:
+            for name in COPIED:
+                if (run / name).is_file():
+                    shutil.copy2(run / name, tmp / name)
+            write_atomic(tmp / CONFIG,
+                         (json.dumps(config, indent=1, sort_keys=True) + "\n").encode())
+            record = {"from_run": str(run), "from_mem": cfg.mem, "mem": str(mem),
+                      "checkpoint_sha256": sha256_file(run / MODEL)}
+            write_atomic(tmp / "fork.json", (json.dumps(record, indent=1) + "\n").encode())
+            publish(tmp, out)
+        except BaseException:
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
     return record

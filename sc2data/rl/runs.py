@@ -32,7 +32,7 @@ from typing import Any
 
 from sc2data.ground import resume
 from sc2data.ground.errors import Sc2DataError
-from sc2data.ground.files import sha256_file, write_atomic
+from sc2data.ground.files import check_out, sha256_file, write_atomic, writing
 from sc2data.ground.formats import Shape, loads
 from sc2data.ground.resume import CONFIG, EVAL, STATE
 from sc2data.model.runs import BEST
@@ -131,16 +131,46 @@ def check_model(run: Path, state: dict[str, Any]) -> None:
                            f"damaged); {remedy(run)}")
 
 
+def load_model(run: Path, env: Any, device: str = "cpu", attach: bool = False) -> Any:
+    """``RUN/model.zip`` as a MaskablePPO agent (checked by content first: :func:`read_state`);
+    one line unless it observes and acts in ``env``'s spaces (a model of another action space
+    or observation). ``attach``: the agent trains on ``env`` (a vector env)."""
+    import zipfile
+
+    from sb3_contrib import MaskablePPO
+
+    path = run / MODEL
+    try:
+        model = MaskablePPO.load(path, env=env if attach else None, device=device)
+    except (ValueError, KeyError, EOFError, RuntimeError, zipfile.BadZipFile) as e:
+        if "spaces do not match" in str(e):  # SB3's check against the env
+            raise Sc2DataError(f"{path} was trained for other observations or actions than "
+                               f"{CONFIG}'s settings; {remedy(run)}") from None
+        first = (str(e).strip().splitlines() or [type(e).__name__])[0]
+        raise Sc2DataError(f"cannot load {path}: {first}; {remedy(run)}") from None
+    for what in ("observation", "action"):
+        if not attach and getattr(model, f"{what}_space") != getattr(env, f"{what}_space"):
+            raise Sc2DataError(f"{path} was trained for other {what}s than {CONFIG}'s "
+                               f"settings ({getattr(model, f'{what}_space')} against "
+                               f"{getattr(env, f'{what}_space')}); {remedy(run)}")
+    return model
+
+
 def commit(run: Path, model: Any, rows: Sequence[dict[str, float]], curve_json: Any,
            state: dict[str, Any]) -> None:
-    """Write a checkpoint as a whole (see the module docstring); ``state`` gains the sha256."""
-    model.save(run / MODEL_PARTIAL)
-    curve = curve_bytes(rows)
-    write_atomic(run / CURVE_PARTIAL, curve)
-    state.update(model_sha256=sha256_file(run / MODEL_PARTIAL), curve_sha256=_sha(curve))
-    write_record(run / STATE_PARTIAL, state)
-    write_record(run / CURVE_JSON, curve_json)  # derived from the same rows, for readers
-    recover(run)
+    """Write a checkpoint as a whole (see the module docstring); ``state`` gains the sha256.
+    A failure part-way (a full disk, Ctrl-C) leaves the previous checkpoint, or this one if its
+    record was written, and no partial file."""
+    try:
+        model.save(run / MODEL_PARTIAL)
+        curve = curve_bytes(rows)
+        write_atomic(run / CURVE_PARTIAL, curve)
+        state.update(model_sha256=sha256_file(run / MODEL_PARTIAL), curve_sha256=_sha(curve))
+        write_record(run / STATE_PARTIAL, state)
+    finally:
+        recover(run)
+    # derived from the committed rows, for readers; a stop before it leaves the last one's
+    write_record(run / CURVE_JSON, curve_json)
 
 
 def read_curve(run: Path) -> list[dict[str, float]]:
@@ -159,6 +189,21 @@ def read_curve(run: Path) -> list[dict[str, float]]:
         raise Sc2DataError(f"{path} does not hold the fields {', '.join(CURVE_FIELDS)}; "
                            f"{remedy(run)}")
     return rows
+
+
+def check_file_out(path: Path) -> None:
+    """One line, before any work, unless ``path`` can be written as a file: no folder there,
+    no file above it."""
+    check_out(path)
+    if path.is_dir():
+        raise Sc2DataError(f"cannot write {path}: it is a folder; --out takes a file name")
+
+
+def write_file(path: Path, data: bytes) -> None:
+    """``path`` written atomically, its parents made; a full disk is one line."""
+    with writing(str(path), "free some space, then rerun the same command"):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_atomic(path, data)
 
 
 def input_digests(narration: Any, mem: str | None) -> dict[str, str]:

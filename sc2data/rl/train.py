@@ -396,8 +396,8 @@ def train(cfg: RLConfig) -> Path:
     begun = (run / runs.CONFIG).is_file()  # an existing run: never forgotten on failure
     run.mkdir(parents=True, exist_ok=True)
     try:
-        with FolderLock(run, "rl train"), writing(f"the run {run}", "free some space, then "
-                                                  "rerun the same command to resume"):
+        with writing(f"the run {run}", "free some space, then rerun the same command to "
+                                       "resume"), FolderLock(run, "rl train"):
             return _train_locked(cfg, run, narration, scorer)
     except BaseException:
         if not begun and not (run / runs.STATE).is_file():
@@ -441,7 +441,6 @@ def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path
         return run
 
     import torch
-    from sb3_contrib import MaskablePPO
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.logger import configure
 
@@ -462,7 +461,7 @@ def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path
     vec = make_vec_env(cfg, scorer, narration)
     try:
         if state["timesteps"]:
-            model = MaskablePPO.load(run / runs.MODEL, env=vec, device=device)
+            model = runs.load_model(run, vec, device, attach=True)
             model.set_random_seed(seed)
         else:
             model = new_model(cfg, vec, seed, device)

@@ -151,6 +151,18 @@ def test_evaluate_and_plot_refuse_what_is_not_a_run(tmp_path: Path,
     assert not (tmp_path / "x.png").exists()
 
 
+def test_an_out_file_that_is_a_folder_or_under_a_file_is_one_line(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``rl plot --out`` and ``rl agreement --out`` take a file name: a folder there, or a file
+    above it, is one line before any work (were tracebacks once the work was done)."""
+    (tmp_path / "afile").write_text("")
+    for out, needle in ((tmp_path, "it is a folder"), (tmp_path / "afile" / "x", "is a file")):
+        for argv in (["rl", "plot", tmp_path, "--out", out],
+                     ["rl", "agreement", tmp_path, "--mem", tmp_path, "--out", out]):
+            code, _, err = run_cli(argv, capsys)
+            assert_one_line_error(code, err, f"cannot write {out}", needle)
+
+
 def test_missing_extra_names_the_install(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                          monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setitem(sys.modules, "sb3_contrib", None)  # import sb3_contrib → ImportError

@@ -96,6 +96,28 @@ def test_files_not_of_the_last_checkpoint_are_refused(
     assert not (tmp_path / "c.png").exists()
 
 
+def test_a_model_of_another_action_space_is_refused_though_recorded(
+        trained: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A paper-space model.zip put into a macro run with its sha256 recorded (a run written
+    before the sha256 were, or a hand-made one) is one line where it is loaded, not a tensor
+    shape error from inside the policy."""
+    paper = tmp_path / "paper"
+    code, _, err = run_cli(["rl", "train", "--out", paper, *TINY, "--action-space", "paper",
+                            "--steps", "32"], capsys)
+    assert code == 0, err
+    run = _copy(trained, tmp_path / "run")
+    shutil.copy(paper / runs.MODEL, run / runs.MODEL)
+    state = json.loads((run / runs.STATE).read_text())
+    state["model_sha256"] = runs.sha256_file(run / runs.MODEL)
+    (run / runs.STATE).write_text(json.dumps(state))
+    for argv in (["rl", "train", "--out", run, *TINY, "--steps", "96"],
+                 ["rl", "evaluate", run, "--episodes", "1", "--no-progress"]):
+        code, _, err = run_cli(argv, capsys)
+        assert_one_line_error(code, err, str(run / runs.MODEL), "was trained for other",
+                              "config.json's settings")
+    assert json.loads((run / runs.STATE).read_text()) == state
+
+
 def test_an_edited_narration_or_another_mem_is_refused_on_resume(
         mem_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     narration = tmp_path / "narration.txt"

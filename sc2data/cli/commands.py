@@ -15,7 +15,6 @@ if TYPE_CHECKING:
 
 from dataclasses import replace
 
-import click
 import typer
 from typer.core import TyperGroup
 
@@ -32,7 +31,7 @@ PIPELINE = ("rollout", "label", "pair", "build", "train", "evaluate", "tsne", "r
 class _PipelineOrder(TyperGroup):
     """Lists the commands in :data:`PIPELINE` order, not alphabetically nor as defined."""
 
-    def list_commands(self, ctx: click.Context) -> list[str]:
+    def list_commands(self, ctx: typer.Context) -> list[str]:  # type: ignore[override]
         names = super().list_commands(ctx)
         return sorted(names, key=lambda n: PIPELINE.index(n) if n in PIPELINE else len(PIPELINE))
 

@@ -420,44 +420,22 @@ def _forget(run: Path, whole: bool) -> None:
 def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path:
     runs.recover(run)
     identity = {**cfg.identity(), "inputs": runs.input_digests(narration, cfg.mem)}
-    state: dict[str, Any] = {"timesteps": 0, "env_steps": 0, "episodes": 0, "resumes": 0}
-    if (run / runs.CONFIG).is_file():
-        old = read_config(run)
-        old_inputs = old.pop("inputs", None)
-        diff = differences(old, cfg.identity())
-        if diff:
-            raise refusal(run, "a run", diff, "rerun with the same options to resume, or pick "
-                          "another --out")
-        if old_inputs is not None and old_inputs != identity["inputs"]:
-            what = sorted(k.replace("_sha256", "") for k in set(old_inputs) | set(
-                identity["inputs"]) if old_inputs.get(k) != identity["inputs"].get(k))
-            raise Sc2DataError(f"{run} was trained with another {' and '.join(what)} (the file "
-                               f"at that path changed); restore it, or pick another --out")
-        previous = runs.read_state(run)
-        if previous is not None:
-            state = {**previous, "resumes": previous["resumes"] + 1}
+    state = _resume_state(cfg, run, identity)
     if state["timesteps"] >= cfg.steps:
         print(f"{run} is already trained for {state['timesteps']} steps (--steps {cfg.steps})")
         return run
 
     import torch
-    from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.logger import configure
-
 
     # The learner and the games' workers take turns (a vector step, then the batched reward and
     # policy; PPO's update while the workers wait), so the learner may use every core.
     torch.set_num_threads(cfg.threads or cores())
     device = resolve_device(cfg.device)
+    formats = _log_formats(cfg)
     _write_json(run / runs.CONFIG, identity)
     rows = [r for r in runs.read_curve(run) if r["timesteps"] <= state["timesteps"]]
     seed = cfg.seed + 1000 * state["resumes"]
-    formats = ["csv"] + (["tensorboard"] if cfg.tensorboard else [])
-    if cfg.tensorboard:
-        try:
-            import tensorboard  # noqa: F401
-        except ImportError:
-            raise MissingDependencyError("tensorboard", "rl", "--tensorboard") from None
     vec = make_vec_env(cfg, scorer, narration)
     try:
         if state["timesteps"]:
@@ -466,68 +444,108 @@ def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path
         else:
             model = new_model(cfg, vec, seed, device)
         model.set_logger(configure(str(run / runs.LOGS / str(state["resumes"])), formats))
-
-        class Curve(BaseCallback):
-            """Episode rows, SMDP step counts, the game's score in SB3's log, the progress
-            bar and periodic checkpoints."""
-
-            def __init__(self, progress: Any) -> None:
-                super().__init__()
-                self.bar = progress
-                self.game = np.zeros(cfg.envs)
-                self.ret = np.zeros(cfg.envs)
-                self.next_save = state["timesteps"] + cfg.checkpoint_every
-                self.last = state["timesteps"]
-                self.finished: list[float] = []
-
-            def _on_step(self) -> bool:
-                infos, dones = self.locals["infos"], self.locals["dones"]
-                rewards = self.locals["rewards"]
-                buffer = self.model.rollout_buffer
-                if hasattr(buffer, "record_steps"):  # SMDPRolloutBuffer, before SB3 adds the step
-                    buffer.record_steps([int(i.get("env_steps", 1)) for i in infos])
-                for i, info in enumerate(infos):
-                    state["env_steps"] += int(info.get("env_steps", 1))
-                    self.game[i] += float(info.get("game_reward", rewards[i]))
-                    self.ret[i] += float(rewards[i])
-                    if dones[i]:
-                        state["episodes"] += 1
-                        marines = int(info.get("marines", self.game[i]))
-                        rows.append({"episode": state["episodes"], "env": i,
-                                     "timesteps": self.num_timesteps,
-                                     "env_steps": state["env_steps"], "marines": marines,
-                                     "game_return": round(self.game[i], 6),
-                                     "return": round(self.ret[i], 6)})
-                        self.finished.append(marines)
-                        self.game[i] = self.ret[i] = 0.0
-                self.bar.update(self.num_timesteps - self.last)
-                self.last = self.num_timesteps
-                if self.num_timesteps >= self.next_save:
-                    self.save()
-                    self.next_save = self.num_timesteps + cfg.checkpoint_every
-                return True
-
-            def _on_rollout_end(self) -> None:
-                self.logger.record("game/pysc2_steps", state["env_steps"])
-                self.logger.record("game/episodes", state["episodes"])
-                if self.finished:
-                    self.logger.record("game/marines_mean", float(np.mean(self.finished)))
-                    self.finished = []
-
-            def save(self) -> None:
-                state["timesteps"] = self.num_timesteps
-                runs.commit(run, model, rows, {"config": cfg.identity(), "episodes": list(rows)},
-                            state)
-
         with bar(cfg.steps, desc="rl train", unit="step", show=cfg.progress) as progress:
             progress.update(state["timesteps"])
-            callback = Curve(progress)
+            callback = _curve(cfg, run, model, rows, state, progress)
             model.learn(total_timesteps=cfg.steps - state["timesteps"], callback=callback,
                         reset_num_timesteps=False)
             callback.save()
     finally:
         vec.close()
     return run
+
+
+def _resume_state(cfg: RLConfig, run: Path, identity: dict[str, Any]) -> dict[str, Any]:
+    """The run's progress to go on from: its last checkpoint's (a resume, counted), or a new
+    run's; a one-line refusal if the folder holds a run of other settings or inputs."""
+    state: dict[str, Any] = {"timesteps": 0, "env_steps": 0, "episodes": 0, "resumes": 0}
+    if not (run / runs.CONFIG).is_file():
+        return state
+    old = read_config(run)
+    old_inputs = old.pop("inputs", None)
+    diff = differences(old, cfg.identity())
+    if diff:
+        raise refusal(run, "a run", diff, "rerun with the same options to resume, or pick "
+                      "another --out")
+    if old_inputs is not None and old_inputs != identity["inputs"]:
+        what = sorted(k.replace("_sha256", "") for k in set(old_inputs) | set(
+            identity["inputs"]) if old_inputs.get(k) != identity["inputs"].get(k))
+        raise Sc2DataError(f"{run} was trained with another {' and '.join(what)} (the file "
+                           f"at that path changed); restore it, or pick another --out")
+    previous = runs.read_state(run)
+    return state if previous is None else {**previous, "resumes": previous["resumes"] + 1}
+
+
+def _log_formats(cfg: RLConfig) -> list[str]:
+    """SB3's log outputs: CSV, and TensorBoard events with ``--tensorboard`` (its package
+    present, else one line)."""
+    if not cfg.tensorboard:
+        return ["csv"]
+    try:
+        import tensorboard  # noqa: F401
+    except ImportError:
+        raise MissingDependencyError("tensorboard", "rl", "--tensorboard") from None
+    return ["csv", "tensorboard"]
+
+
+def _curve(cfg: RLConfig, run: Path, model: Any, rows: list[dict[str, Any]],
+           state: dict[str, Any], progress: Any) -> Any:
+    """The callback that keeps the run's record while PPO learns: episode rows, SMDP step
+    counts, the game's score in SB3's log, the progress bar and periodic checkpoints (its
+    ``save`` commits one). ``rows`` and ``state`` are updated in place."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class Curve(BaseCallback):
+        def __init__(self) -> None:
+            super().__init__()
+            self.game = np.zeros(cfg.envs)
+            self.ret = np.zeros(cfg.envs)
+            self.next_save = state["timesteps"] + cfg.checkpoint_every
+            self.last = state["timesteps"]
+            self.finished: list[float] = []
+
+        def _on_step(self) -> bool:
+            infos, dones = self.locals["infos"], self.locals["dones"]
+            rewards = self.locals["rewards"]
+            buffer = self.model.rollout_buffer
+            if hasattr(buffer, "record_steps"):  # SMDPRolloutBuffer, before SB3 adds the step
+                buffer.record_steps([int(i.get("env_steps", 1)) for i in infos])
+            for i, info in enumerate(infos):
+                state["env_steps"] += int(info.get("env_steps", 1))
+                self.game[i] += float(info.get("game_reward", rewards[i]))
+                self.ret[i] += float(rewards[i])
+                if dones[i]:
+                    self._episode_end(i, info)
+            progress.update(self.num_timesteps - self.last)
+            self.last = self.num_timesteps
+            if self.num_timesteps >= self.next_save:
+                self.save()
+                self.next_save = self.num_timesteps + cfg.checkpoint_every
+            return True
+
+        def _episode_end(self, i: int, info: dict[str, Any]) -> None:
+            state["episodes"] += 1
+            marines = int(info.get("marines", self.game[i]))
+            rows.append({"episode": state["episodes"], "env": i,
+                         "timesteps": self.num_timesteps, "env_steps": state["env_steps"],
+                         "marines": marines, "game_return": round(self.game[i], 6),
+                         "return": round(self.ret[i], 6)})
+            self.finished.append(marines)
+            self.game[i] = self.ret[i] = 0.0
+
+        def _on_rollout_end(self) -> None:
+            self.logger.record("game/pysc2_steps", state["env_steps"])
+            self.logger.record("game/episodes", state["episodes"])
+            if self.finished:
+                self.logger.record("game/marines_mean", float(np.mean(self.finished)))
+                self.finished = []
+
+        def save(self) -> None:
+            state["timesteps"] = self.num_timesteps
+            runs.commit(run, model, rows, {"config": cfg.identity(), "episodes": list(rows)},
+                        state)
+
+    return Curve()
 
 
 def summary_line(run: Path, seconds: float | None = None) -> str:

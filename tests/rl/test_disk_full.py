@@ -96,9 +96,17 @@ def test_two_envs_in_worker_processes(fs: Path) -> None:
     args = _train(run, 128, envs=2)
     _fails_when_filling_at(runs.MODEL_PARTIAL, fs, *args, nth=2)
     _whole(run, 64, 0)
-    assert set(arena.folder().glob(f"{arena.PREFIX}*")) <= before
+    assert not _leaked(before)
     assert exit_code(*args) == 0
     _whole(run, 128, 1)
+
+
+def _leaked(before: set[Path]) -> set[Path]:
+    """Shared-memory files made since ``before`` whose creator no longer runs: another test's
+    or another run's live file (the instant between its creation and its unlinking) is not a
+    leak, and the suite runs RL tests side by side."""
+    now = set(arena.folder().glob(f"{arena.PREFIX}*")) - before
+    return {p for p in now if not arena._alive(int(p.name[len(arena.PREFIX):].split("-")[0]))}
 
 
 def test_tensorboard_events(base: Path, fs: Path) -> None:

@@ -90,3 +90,41 @@ def test_commands_start_without_torch_or_the_real_games_environment() -> None:
     done = subprocess.run([sys.executable, "-c", code], cwd=PACKAGE.parent, capture_output=True,
                           text=True, check=True)
     assert done.stdout.strip() == "", f"sc2data.cli.commands imports {done.stdout.strip()}"
+
+
+def _graph() -> dict[str, set[str]]:
+    """Every ``sc2data`` module and the modules it imports anywhere (in functions, and for type
+    checking too): ``from a.b import c`` counts ``a.b.c`` where that is a module."""
+    modules = {}
+    for path in PACKAGE.rglob("*.py"):
+        parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+        modules[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+    graph: dict[str, set[str]] = {}
+    for name, path in modules.items():
+        found: set[str] = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("sc2data"):
+                found |= {f"{node.module}.{a.name}" if f"{node.module}.{a.name}" in modules
+                          else str(node.module) for a in node.names}
+            elif isinstance(node, ast.Import):
+                found |= {a.name for a in node.names}
+        graph[name] = found & modules.keys()
+    return graph
+
+
+def test_no_import_cycles() -> None:
+    """No module reaches itself through imports, not even through one made for type checking or
+    inside a function: a cycle means two modules that cannot be read apart."""
+    graph = _graph()
+    cycles = []
+    for start in sorted(graph):
+        seen, todo = set(), [(start, (start,))]
+        while todo:
+            node, path = todo.pop()
+            for nxt in graph[node]:
+                if nxt == start:
+                    cycles.append(" → ".join((*path, start)))
+                elif nxt not in seen:
+                    seen.add(nxt)
+                    todo.append((nxt, (*path, nxt)))
+    assert not cycles, "\n".join(cycles)

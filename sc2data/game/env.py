@@ -25,27 +25,23 @@ def sc2_path() -> Path:
     return Path(os.environ.get("SC2PATH", "~/StarCraftII")).expanduser()
 
 
-MOCK_ENV_VAR = "SC2DATA_MOCK_SC2"
-"""Set to ``1`` to put pysc2's mock in place of the game, for tests only
-(:mod:`sc2data.game.mock_sc2`): ``sc2_available`` says yes and ``make_env("sc2")`` builds the
-mock. Worker processes inherit it."""
-
-
-def mocked() -> bool:
-    """Whether ``SC2DATA_MOCK_SC2=1`` puts pysc2's mock in place of the game."""
-    return os.environ.get(MOCK_ENV_VAR) == "1"
-
-
 def sc2_available() -> bool:
-    """True where the SC2 binary and the BuildMarines map are both installed (or mocked)."""
-    if mocked():
-        return True
+    """True where the SC2 binary and the BuildMarines map are both installed."""
     root = sc2_path()
     has_binary = any((root / "Versions").glob("Base*/SC2_x64"))
     maps = root / "Maps"
     has_map = (maps / "mini_games" / "BuildMarines.SC2Map").is_file() or \
         (maps / "BuildMarines.SC2Map").is_file()
     return has_binary and has_map
+
+
+def sc2_env_kwargs(seed: int | None, step_mul: int = STEP_MUL) -> dict[str, Any]:
+    """``SC2Env``'s arguments for BuildMarines: the map, one Terran agent, this project's
+    interface format (also what :mod:`sc2data.testing.mock_sc2` builds its mock with)."""
+    sc2_env = _pysc2.sc2_env
+    return {"map_name": MAP_NAME, "players": [sc2_env.Agent(sc2_env.Race.terran)],
+            "agent_interface_format": interface_format(), "step_mul": step_mul,
+            "random_seed": seed}
 
 
 def make_env(backend: str = "sim", *, seed: int | None = None, step_mul: int = STEP_MUL,
@@ -63,13 +59,5 @@ def make_env(backend: str = "sim", *, seed: int | None = None, step_mul: int = S
         if not sc2_available():
             raise Sc2DataError(f"StarCraft II or the BuildMarines map was not found under "
                                f"{sc2_path()}; {SC2_INSTALL_HINT}")
-        sc2_env = _pysc2.sc2_env
-        game: Any = sc2_env.SC2Env
-        if mocked():
-            from sc2data.game.mock_sc2 import MockSC2Env
-
-            game = MockSC2Env
-        return game(map_name=MAP_NAME, players=[sc2_env.Agent(sc2_env.Race.terran)],
-                    agent_interface_format=interface_format(), step_mul=step_mul,
-                    random_seed=seed, **kwargs)
+        return _pysc2.sc2_env.SC2Env(**sc2_env_kwargs(seed, step_mul), **kwargs)
     raise Sc2DataError(f"unknown environment {backend!r}; choose one of: {', '.join(BACKENDS)}")

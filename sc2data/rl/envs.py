@@ -67,19 +67,12 @@ from sc2data.game.env import make_env
 from sc2data.game.screen import ScreenView
 from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.vocab import SCREEN_SIZE, STEP_MUL
-from sc2data.rl.obs import ObsConfig, Observer
+from sc2data.rl.obs import PAPER_FUNCTIONS, ObsConfig, Observer
 
 ACTION_SPACES: tuple[str, ...] = ("macro", "paper")
 
 MACROS: tuple[str, ...] = ReducedRandomAgent.MACROS
 """The macro actions, in action-index order (the reduced-random agent's set)."""
-
-PAPER_FUNCTIONS: tuple[str, ...] = (
-    "no_op", "select_point", "select_rect", "select_idle_worker", "select_army",
-    "Build_SupplyDepot_screen", "Build_Barracks_screen", "Train_SCV_quick", "Train_Marine_quick",
-    "Harvest_Gather_screen",
-)
-"""The reduced pysc2 function set of the paper action space, in action-index order."""
 
 RECT_HALF = 4
 """``select_rect`` selects the box of ±4 pixels around the chosen point (one point, not two)."""

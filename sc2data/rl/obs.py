@@ -16,7 +16,7 @@
     at the same size. The camera is locked on BuildMarines and the screen shows the whole
     playable area, so it adds little; off by default.
   - ``vector``: float32, ``log1p`` of the ``player`` fields, the episode's elapsed fraction of
-    its 14,400 game loops, and which :data:`~sc2data.rl.envs.PAPER_FUNCTIONS` are available.
+    its 14,400 game loops, and which :data:`PAPER_FUNCTIONS` are available.
 
 An :class:`Observer` turns one pysc2 observation into its arrays (writing into given arrays when
 asked: the vector env writes straight into shared memory) and names the feature layers it reads,
@@ -37,6 +37,14 @@ from sc2data._pysc2 import actions, features, units
 from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.vocab import SCREEN_SIZE
 from sc2data.schema import Schema
+
+PAPER_FUNCTIONS: tuple[str, ...] = (
+    "no_op", "select_point", "select_rect", "select_idle_worker", "select_army",
+    "Build_SupplyDepot_screen", "Build_Barracks_screen", "Train_SCV_quick", "Train_Marine_quick",
+    "Harvest_Gather_screen",
+)
+"""The reduced pysc2 function set of the paper action space, in action-index order (here because
+the observation reports which of them are available; :mod:`sc2data.rl.envs` acts with them)."""
 
 OBSERVATIONS: tuple[str, ...] = ("stored", "compact")
 
@@ -212,6 +220,4 @@ def _fit(planes: np.ndarray, out: np.ndarray, n_onehot: int) -> None:
 
 @functools.cache
 def _paper_ids() -> np.ndarray:
-    from sc2data.rl.envs import PAPER_FUNCTIONS
-
     return np.array([int(actions.FUNCTIONS[name].id) for name in PAPER_FUNCTIONS])

@@ -87,7 +87,7 @@ class Commands:
         """Slot + 1 of the unit drawn on top at each screen pixel (0: none), set by drawing."""
         self.action_result: list[int] = []
         self.last_actions: list[int] = []
-        self._last_idle_tag = 0
+        self.last_idle_tag = 0
         self._groups: dict[int, list[Unit]] = {}
         self._groups_version = -1
 

@@ -1,6 +1,7 @@
 """What each pysc2 function does in BuildMarines: selection, UI and unit commands.
 
-Each handler gets the :class:`~sc2data.game.sim.commands.Commands` and the call's converted
+Each handler gets a :class:`Context` (the one implementation is
+:class:`~sc2data.game.sim.commands.Commands`, which imports this module) and the call's converted
 arguments (pysc2's argument converters: points, enum values), carries the command out on the
 game's current loop, and returns 0 or the ``ActionResult`` code the game would report (then
 nothing happened). Commands go to the selected units that have the ability, as the game does:
@@ -9,23 +10,52 @@ a train command to the least busy producer, a build command to the nearest SCV.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable
+from typing import Any, Protocol
 
 import numpy as np
 
 from sc2data._pysc2 import actions
 from sc2data.game.sim import mapdata as md
 from sc2data.game.sim.codes import CANT_TARGET_THAT_UNIT, ERROR
+from sc2data.game.sim.game import Game
 from sc2data.game.sim.store import PLAYER_SELF, Unit
 
-if TYPE_CHECKING:
-    from sc2data.game.sim.commands import Commands
+
+class Context(Protocol):
+    """What a handler reads and changes besides the call's arguments."""
+
+    game: Game
+    last_idle_tag: int
+    """The tag of the idle SCV the last ``select_idle_worker`` picked (the next call cycles on)."""
+
+    @property
+    def t(self) -> float:
+        """The game loop now."""
+
+    def production_unit(self) -> Unit | None:
+        """The producer shown in the production panel, if any."""
+
+    def unit_at_screen(self, p: Any) -> Unit | None:
+        """The unit drawn on top at a screen pixel."""
+
+    def own_selected(self, utypes: tuple[int, ...]) -> list[Unit]:
+        """The selection's own finished units of these types."""
+
+    def set_selection(self, units: list[Unit]) -> None:
+        """Make ``units`` the selection."""
+
+    def own_on_screen(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Own units' slots with their screen centres and pixel radii."""
+
+    def world_target(self, kw: dict[str, Any]) -> tuple[float, float, Unit | None]:
+        """The world point (and unit under it) of a screen or minimap argument."""
 
 F = actions.FUNCTIONS
 _PRODUCERS = (md.CC, md.BARRACKS)
 
 
-def _select_point(c: Commands, kw: dict[str, Any]) -> int:
+def _select_point(c: Context, kw: dict[str, Any]) -> int:
     act = int(kw["select_point_act"])  # sc2 Select 1, Toggle 2, AllType 3, AddAllType 4
     u = c.unit_at_screen(kw["screen"])
     sel = c.game.selection
@@ -48,7 +78,7 @@ def _select_point(c: Commands, kw: dict[str, Any]) -> int:
     return 0
 
 
-def _select_rect(c: Commands, kw: dict[str, Any]) -> int:
+def _select_rect(c: Context, kw: dict[str, Any]) -> int:
     a, b = kw["screen"], kw["screen2"]
     x0, x1 = min(a.x, b.x), max(a.x, b.x) + 1
     y0, y1 = min(a.y, b.y), max(a.y, b.y) + 1
@@ -65,7 +95,7 @@ def _select_rect(c: Commands, kw: dict[str, Any]) -> int:
     return 0
 
 
-def _select_control_group(c: Commands, kw: dict[str, Any]) -> int:
+def _select_control_group(c: Context, kw: dict[str, Any]) -> int:
     act, gid = int(kw["control_group_act"]), int(kw["control_group_id"])
     groups = c.game.groups  # sc2 Recall 1, Set 2, Append 3, SetAndSteal 4, AppendAndSteal 5
     own = [u for u in c.game.selection if u.owner == PLAYER_SELF]
@@ -84,7 +114,7 @@ def _select_control_group(c: Commands, kw: dict[str, Any]) -> int:
     return 0
 
 
-def _select_unit(c: Commands, kw: dict[str, Any]) -> int:
+def _select_unit(c: Context, kw: dict[str, Any]) -> int:
     act, i = int(kw["select_unit_act"]), int(kw["select_unit_id"])
     sel = c.game.selection  # sc2 SingleSelect 1, DeselectUnit 2, SelectAllOfType 3, Deselect... 4
     if i >= len(sel):
@@ -101,7 +131,7 @@ def _select_unit(c: Commands, kw: dict[str, Any]) -> int:
     return 0
 
 
-def _select_idle_worker(c: Commands, kw: dict[str, Any]) -> int:
+def _select_idle_worker(c: Context, kw: dict[str, Any]) -> int:
     act = int(kw["select_worker"])  # sc2 Set 1, Add 2, All 3, AddAll 4
     idle = sorted(c.game.idle_workers, key=lambda u: u.tag)
     if act in (3, 4):
@@ -110,19 +140,19 @@ def _select_idle_worker(c: Commands, kw: dict[str, Any]) -> int:
     pool = [u for u in idle if u not in c.game.selection] if act == 2 else idle
     if not pool:
         return 0
-    nxt = next((u for u in pool if u.tag > c._last_idle_tag), pool[0])
-    c._last_idle_tag = nxt.tag
+    nxt = next((u for u in pool if u.tag > c.last_idle_tag), pool[0])
+    c.last_idle_tag = nxt.tag
     c.set_selection([nxt] if act == 1 else c.game.selection + [nxt])
     return 0
 
 
-def _select_army(c: Commands, kw: dict[str, Any]) -> int:
+def _select_army(c: Context, kw: dict[str, Any]) -> int:
     army = c.game.army()
     c.set_selection(c.game.selection + army if bool(kw["select_add"]) else army)
     return 0
 
 
-def _build_queue(c: Commands, kw: dict[str, Any]) -> int:
+def _build_queue(c: Context, kw: dict[str, Any]) -> int:
     b = c.production_unit()
     if b is None:
         return ERROR
@@ -130,7 +160,7 @@ def _build_queue(c: Commands, kw: dict[str, Any]) -> int:
 
 
 def _train(utype: int, producer: int) -> Any:
-    def handler(c: Commands, kw: dict[str, Any]) -> int:
+    def handler(c: Context, kw: dict[str, Any]) -> int:
         cands = c.own_selected((producer,))
         if not cands:
             return ERROR
@@ -140,7 +170,7 @@ def _train(utype: int, producer: int) -> Any:
 
 
 def _build(utype: int) -> Any:
-    def handler(c: Commands, kw: dict[str, Any]) -> int:
+    def handler(c: Context, kw: dict[str, Any]) -> int:
         scvs = c.own_selected((md.SCV,))
         if not scvs:
             return ERROR
@@ -154,7 +184,7 @@ def _d2(a: tuple[float, float], b: tuple[float, float]) -> float:
     return (a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2
 
 
-def _gather(c: Commands, kw: dict[str, Any]) -> int:
+def _gather(c: Context, kw: dict[str, Any]) -> int:
     x, y, target = c.world_target(kw)
     if target is None or target.utype != md.MINERAL:
         return CANT_TARGET_THAT_UNIT
@@ -164,18 +194,18 @@ def _gather(c: Commands, kw: dict[str, Any]) -> int:
     return err
 
 
-def _return_cargo(c: Commands, kw: dict[str, Any]) -> int:
+def _return_cargo(c: Context, kw: dict[str, Any]) -> int:
     for u in c.own_selected((md.SCV,)):
         if u.cargo:
             c.game.order_return(u, c.t)
     return 0
 
 
-def _marines(c: Commands) -> list[Unit]:
+def _marines(c: Context) -> list[Unit]:
     return c.own_selected((md.MARINE,))
 
 
-def _attack(c: Commands, kw: dict[str, Any]) -> int:
+def _attack(c: Context, kw: dict[str, Any]) -> int:
     x, y, target = c.world_target(kw)
     for u in _marines(c):
         if target is not None and target.owner == PLAYER_SELF and target is not u:
@@ -185,14 +215,14 @@ def _attack(c: Commands, kw: dict[str, Any]) -> int:
     return 0
 
 
-def _move(c: Commands, kw: dict[str, Any]) -> int:
+def _move(c: Context, kw: dict[str, Any]) -> int:
     x, y, _ = c.world_target(kw)
     for u in _marines(c):
         c.game.order_move(u, x, y, c.t)
     return 0
 
 
-def _patrol(c: Commands, kw: dict[str, Any]) -> int:
+def _patrol(c: Context, kw: dict[str, Any]) -> int:
     x, y, _ = c.world_target(kw)
     for u in _marines(c):
         c.game.order_patrol(u, x, y, c.t)
@@ -200,14 +230,14 @@ def _patrol(c: Commands, kw: dict[str, Any]) -> int:
 
 
 def _stop(hold: bool) -> Any:
-    def handler(c: Commands, kw: dict[str, Any]) -> int:
+    def handler(c: Context, kw: dict[str, Any]) -> int:
         for u in _marines(c):
             c.game.order_idle(u, c.t, hold=hold)
         return 0
     return handler
 
 
-def _rally(c: Commands, kw: dict[str, Any], producers: tuple[int, ...] = (md.CC,)) -> int:
+def _rally(c: Context, kw: dict[str, Any], producers: tuple[int, ...] = (md.CC,)) -> int:
     x, y, target = c.world_target(kw)
     patch = target if target is not None and target.utype == md.MINERAL else None
     for b in c.own_selected(producers):
@@ -215,7 +245,7 @@ def _rally(c: Commands, kw: dict[str, Any], producers: tuple[int, ...] = (md.CC,
     return 0
 
 
-def _smart(c: Commands, kw: dict[str, Any]) -> int:
+def _smart(c: Context, kw: dict[str, Any]) -> int:
     """Right-click: gather / return / resume building / move for SCVs, move for marines,
     rally for production structures."""
     x, y, target = c.world_target(kw)
@@ -236,7 +266,7 @@ def _smart(c: Commands, kw: dict[str, Any]) -> int:
     return 0
 
 
-HANDLERS: dict[int, Any] = {
+HANDLERS: dict[int, Callable[[Context, dict[str, Any]], int]] = {
     # function id -> handler(commands, converted kwargs) -> ActionResult code (0: success)
     int(F.select_point.id): _select_point,
     int(F.select_rect.id): _select_rect,

@@ -7,18 +7,20 @@ is that environment with ``SC2Env``'s constructor, and it checks every action as
 (pysc2's ``Features.transform_action``: an unavailable function or a bad argument raises), so
 agents, rollout, verify, label and the MEM reward run the real interface end to end in tests.
 
-For tests only: with ``SC2DATA_MOCK_SC2=1`` in the environment, :func:`sc2data.game.env.make_env`
-builds this instead of ``SC2Env`` and :func:`sc2data.game.env.sc2_available` says yes — in
-worker processes too, which inherit the variable. Never set it for real data: the frames are
-dummies.
+For tests only (the frames are dummies), and chosen by injection, never by a switch in the
+library: ``rollout(config, out, env_factory=mock_env_factory())`` with ``config.env == "sc2"``
+runs the real game's code path on it, in worker processes too (the factory pickles).
 """
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from typing import Any
 
 from sc2data._pysc2 import environment
+from sc2data.game.env import sc2_env_kwargs
+from sc2data.ground.vocab import STEP_MUL
 
 from pysc2.env import mock_sc2_env  # isort: skip  (after sc2data._pysc2: pysc2 on 3.11)
 
@@ -53,3 +55,13 @@ class MockSC2Env(mock_sc2_env.SC2TestEnv):
 
     def close(self) -> None:
         """Nothing to close (no game process)."""
+
+
+def make_mock_env(step_mul: int, seed: int | None) -> MockSC2Env:
+    """The mock built as ``make_env("sc2", seed=seed, step_mul=step_mul)`` builds ``SC2Env``."""
+    return MockSC2Env(**sc2_env_kwargs(seed, step_mul))
+
+
+def mock_env_factory(step_mul: int = STEP_MUL) -> functools.partial[MockSC2Env]:
+    """A picklable ``env_factory`` for :func:`sc2data.rollout`: ``factory(seed)`` is the mock."""
+    return functools.partial(make_mock_env, step_mul)

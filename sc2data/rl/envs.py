@@ -34,7 +34,8 @@ macro space it is what the observation says can be started now: free supply, the
 macro selects, free ground for a building, a completed depot for a barracks, an idle worker to
 send (minerals are waited for, not masked). A call that is unavailable is never sent: a
 masked-out action (from an agent that ignores the mask) plays ``no_op`` instead, with
-``info["invalid"] = True``, and a macro whose next call turns out unavailable (say, a barracks
+``info["invalid"] = True`` (``info["action"]`` names the function or macro chosen, played or
+not), and a macro whose next call turns out unavailable (say, a barracks
 still under construction cannot train) ends there.
 
 Observations (:mod:`sc2data.rl.obs`): ``obs="stored"`` (the default here) is a ``Dict`` with one
@@ -189,14 +190,19 @@ class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
         self.frames = [self._ts.observation]
         reward = 0.0
         invalid = not self._allowed(action)
+        if self.kind == "paper":
+            fn, x, y = (int(a) for a in np.asarray(action).reshape(3))
+            name = PAPER_FUNCTIONS[fn]
+        else:
+            name = MACROS[int(action)]
         if invalid:
             reward += self._send(NO_OP)
         elif self.kind == "paper":
-            reward += self._send(paper_call(*(int(a) for a in np.asarray(action).reshape(3))))
+            reward += self._send(paper_call(fn, x, y))
         else:
-            reward += self._play_macro(MACROS[int(action)])
+            reward += self._play_macro(name)
         info = {"game_reward": reward, "env_steps": len(self.frames) - 1, "invalid": invalid,
-                "game_loop": self._loop(), "marines": self._marines()}
+                "game_loop": self._loop(), "marines": self._marines(), "action": name}
         return self._obs(), reward, bool(self._ts.last()), False, info
 
     def action_masks(self) -> np.ndarray:

@@ -10,10 +10,13 @@ action). Both go to ``RUN/eval.json``::
     {"episodes": 10, "seeds": [...], "sides": ["west", "east", ...],
      "sampled": {"marines": [...], "mean": …, "std": …, "iqm": …},
      "argmax":  {"marines": [...], "mean": …, "std": …, "iqm": …},
+     "actions": {"sampled": {"select_point": 0.31, …}, "argmax": {…}},
      "trained_timesteps": …, "trained_env_steps": …, "config": {…}, "protocol": 2}
 
 ``std`` is the sample standard deviation (ddof 1), ``iqm`` the interquartile mean over the
-episodes. Scores are the game's own: marines made in the episode, whatever the training reward.
+episodes; ``actions`` the share of decisions each function (paper space) or macro chose, with
+``+masked`` for a choice the masks did not allow — what an argmax policy that makes no marine
+plays instead. Scores are the game's own: marines made in the episode, whatever the training reward.
 
 Reference agents (:func:`baselines`, ``sc2data rl baselines --out DIR``) are played once on the
 same seeds and stored in ``DIR/baselines.json``: the masked uniform policy of each action space
@@ -25,6 +28,7 @@ from __future__ import annotations
 
 import functools
 import io
+from collections import Counter
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
@@ -59,7 +63,8 @@ SCORES_SHAPE: Shape = {"marines": [int], "mean": float, "std": float, "iqm": flo
 """Marines per episode and their summaries (:func:`scores`)."""
 EVAL_SHAPE: Shape = {"episodes": int, "seeds": [int], "sides": [str], "sampled": SCORES_SHAPE,
                      "argmax": SCORES_SHAPE, "protocol": int,
-                     "trained_timesteps?": (int, type(None))}
+                     "trained_timesteps?": (int, type(None)),
+                     "actions?": {"*": {"*": float}}}
 """``eval.json``, as :func:`read_eval` checks it."""
 BASELINES_SHAPE: Shape = {"episodes": int, "seeds": [int], "episode_steps": (int, type(None)),
                           "protocol": int, "agents": {"*": {"space": str, **SCORES_SHAPE}}}
@@ -175,17 +180,25 @@ class UniformPolicy:
 
 
 def _episodes(policy: Any, env: Any, seeds: Sequence[int], deterministic: bool,
-              tick: Callable[[], None]) -> list[int]:
-    """Marines made in each seeded episode (the policy's sampling reseeded per episode)."""
+              tick: Callable[[], None], actions: Counter[str] | None = None) -> list[int]:
+    """Marines made in each seeded episode (the policy's sampling reseeded per episode);
+    ``actions`` counts the functions (or macros) chosen, ``+masked`` marking those not allowed."""
     marines = []
     for seed in seeds:
         policy.set_random_seed(seed)
         info: dict[str, Any] = {}
-        for info in play(policy, env, seed, deterministic):  # noqa: B007  (the last one)
-            pass
+        for info in play(policy, env, seed, deterministic):
+            if actions is not None:
+                actions[info["action"] + ("+masked" if info["invalid"] else "")] += 1
         marines.append(int(info["marines"]))
         tick()
     return marines
+
+
+def action_shares(counts: Counter[str]) -> dict[str, float]:
+    """Each action's share of the decisions, largest first."""
+    total = sum(counts.values())
+    return {name: round(n / total, 4) for name, n in counts.most_common()}
 
 
 def evaluate(run: Path, episodes: int = 10, progress: bool | None = None) -> dict[str, Any]:
@@ -206,13 +219,16 @@ def evaluate(run: Path, episodes: int = 10, progress: bool | None = None) -> dic
                           game_loops=game_loops(cfg))
     try:
         model = load_model(run, env)
+        counts: dict[str, Counter[str]] = {"sampled": Counter(), "argmax": Counter()}
         with bar(2 * episodes, desc="rl evaluate", unit="episode", show=progress) as b:
-            sampled = _episodes(model, env, seeds, False, lambda: b.update(1))
-            argmax = _episodes(model, env, seeds, True, lambda: b.update(1))
+            sampled = _episodes(model, env, seeds, False, lambda: b.update(1), counts["sampled"])
+            argmax = _episodes(model, env, seeds, True, lambda: b.update(1), counts["argmax"])
     finally:
         env.close()
     result = {"episodes": episodes, "seeds": seeds, "sides": sides, "sampled": scores(sampled),
-              "argmax": scores(argmax), "trained_timesteps": state.get("timesteps"),
+              "argmax": scores(argmax),
+              "actions": {mode: action_shares(c) for mode, c in counts.items()},
+              "trained_timesteps": state.get("timesteps"),
               "trained_env_steps": state.get("env_steps"), "config": cfg.identity(),
               "protocol": PROTOCOL}
     with writing(str(run / EVAL), "free some space, then rerun the same command"):
@@ -244,13 +260,18 @@ def read_eval(run: Path) -> dict[str, Any]:
 
 
 def summary(result: dict[str, Any]) -> str:
-    """Two lines: sampled and argmax marines per episode (mean ± sample std, IQM)."""
+    """Sampled and argmax marines per episode (mean ± sample std, IQM), then each mode's most
+    chosen actions (what an argmax policy that makes nothing does instead)."""
     west = sum(s == "west" for s in result["sides"])
     where = (f"over {result['episodes']} episodes ({west} west, {result['episodes'] - west} east "
              f"starts; seeds {min(result['seeds'])}…{max(result['seeds'])})")
-    return "\n".join(
-        f"{mode:>7}: marines per episode {result[mode]['mean']:.2f} ± {result[mode]['std']:.2f} "
-        f"(IQM {result[mode]['iqm']:.2f}) {where}" for mode in ("sampled", "argmax"))
+    lines = [f"{mode:>7}: marines per episode {result[mode]['mean']:.2f} ± "
+             f"{result[mode]['std']:.2f} (IQM {result[mode]['iqm']:.2f}) {where}"
+             for mode in ("sampled", "argmax")]
+    for mode, shares in result.get("actions", {}).items():
+        top = ", ".join(f"{name} {share:.0%}" for name, share in list(shares.items())[:4])
+        lines.append(f"{mode:>7}: decisions {top}")
+    return "\n".join(lines)
 
 
 # -- reference agents -------------------------------------------------------------------------

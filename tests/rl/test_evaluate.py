@@ -76,3 +76,40 @@ def test_baselines_play_every_reference_agent_on_the_evaluation_episodes(
     assert json.loads((out / "baselines.json").read_text()) == record
     code, _, err = run_cli(["rl", "baselines", "--out", out, "--episodes", "0"], capsys)
     assert_one_line_error(code, err, "--episodes")
+
+
+class _Always:
+    """A policy that always plays one action, allowed or not (to see ``+masked`` counted)."""
+
+    def __init__(self, action: np.ndarray) -> None:
+        self.action = action
+
+    def set_random_seed(self, seed: int) -> None:
+        pass
+
+    def predict(self, obs: object, deterministic: bool = False,
+                action_masks: np.ndarray | None = None) -> tuple[np.ndarray, None]:
+        return self.action, None
+
+
+def test_evaluation_counts_the_actions_each_mode_chose() -> None:
+    from collections import Counter
+
+    from sc2data.rl.evaluate import _episodes, action_shares
+
+    env = BuildMarinesGym("paper", obs="compact", game_loops=200)
+    try:
+        seeds = eval_seeds(2)[0]
+        counts: Counter[str] = Counter()
+        _episodes(UniformPolicy(env.action_space.nvec), env, seeds, False, lambda: None, counts)
+        assert set(counts) <= set(PAPER_FUNCTIONS) and len(counts) > 2  # the masks hold
+        assert sum(counts.values()) == 2 * 25  # 200 game loops are 25 decisions
+        shares = action_shares(counts)
+        assert abs(sum(shares.values()) - 1) < 1e-3 and list(shares.values()) == sorted(
+            shares.values(), reverse=True)
+        train = PAPER_FUNCTIONS.index("Train_Marine_quick")  # never available at the start
+        counts = Counter()
+        _episodes(_Always(np.array([train, 0, 0])), env, seeds[:1], True, lambda: None, counts)
+        assert counts == Counter({"Train_Marine_quick+masked": 25})
+    finally:
+        env.close()

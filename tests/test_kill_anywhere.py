@@ -1,6 +1,9 @@
 """A real ``sc2data build`` and ``sc2data train``, stopped at a seeded random moment of their run
 (``kill -9`` or Ctrl-C), then run again to the end: the result equals an uninterrupted
 run's, byte for byte (shards, labels, pair set) or tensor for tensor (checkpoint, metrics).
+So do ``export`` (npz, hf), a trained policy's ``rollout --agent policy:RUN`` and ``pair`` of a
+mixed recipe (a reduced-random and a policy source); ``rl train``, which a resume seeds anew,
+agrees with itself.
 
 The moments are drawn uniformly over the uninterrupted run's own duration, start-up included, so
 over the runs of the suite they land in every stage — importing, rolling out, labelling, drawing
@@ -14,6 +17,8 @@ import hashlib
 import json
 import os
 import random
+import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -91,6 +96,10 @@ def _stop_at(args: list[str], seconds: float, sig: int) -> bool:
     _, err = proc.communicate(timeout=300)
     if proc.returncode == 0:
         return False
+    if sig == signal.SIGINT and _as_python_started(proc.returncode, err):
+        print("the Ctrl-C landed as Python started, before sc2data's handler: Python's own "
+              "ending (a known gap, docs/reliability.md)")
+        return True
     assert "Traceback" not in err, err
     if sig == signal.SIGINT:
         assert proc.returncode == 130, err
@@ -99,6 +108,16 @@ def _stop_at(args: list[str], seconds: float, sig: int) -> bool:
     else:
         assert proc.returncode == -signal.SIGKILL, err
     return True
+
+
+def _as_python_started(returncode: int, err: str) -> bool:
+    """A Ctrl-C in the first milliseconds, while the interpreter starts (site, runpy), before
+    ``sc2data.cli.main`` takes SIGINT: killed by it, or a ``KeyboardInterrupt`` traceback that
+    never passed through ``main`` (which turns any later one into 130 and one line)."""
+    if returncode == -signal.SIGINT:
+        return not err.strip()
+    return returncode != 130 and err.rstrip().endswith("KeyboardInterrupt") and \
+        re.search(r'sc2data/cli/__init__\.py", line \d+, in main\n', err) is None
 
 
 def _stopped_then_finished(args: list[str], duration: float, rng: random.Random) -> None:
@@ -199,3 +218,150 @@ def test_rl_train_stopped_anywhere_resumes_to_a_run_that_agrees_with_itself(
     done = subprocess.run(_sc2data("rl", "evaluate", out, "--episodes", "1", "--no-progress"),
                           cwd=ROOT, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
+
+
+def _verifies(path: Path) -> None:
+    done = subprocess.run(_sc2data("verify", path), cwd=ROOT, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+
+
+@pytest.mark.parametrize("to", ["npz", "hf"])
+def test_export_stopped_anywhere_finishes_to_the_same_export(
+        reference: tuple[Path, Path, float, float], tmp_path: Path, to: str) -> None:
+    """``export`` of the reference build's rollout, stopped anywhere and rerun, equals an
+    uninterrupted export file for file (the files are deterministic: a Hugging Face dataset's
+    ``state.json`` aside, whose ``_fingerprint`` datasets draws at random) and in content, and
+    leaves no ``*.partial*`` beside ``--out``. A kill after the rename leaves ``OUT`` whole: the
+    rerun exports it again rather than refusing it."""
+    if to == "hf":
+        datasets = pytest.importorskip("datasets")
+    _, root, _, _ = reference
+    # An hf row holds both frames of a stack, uncompressed: one episode is 370 MB, three 1.1 GB.
+    some = ["--episodes", "1"] if to == "hf" else []
+    ref, out = tmp_path / "ref", tmp_path / "out"
+    duration = _run(_cli("export", root / "build" / "rollout", "--to", to, "--out", ref, *some))
+    _stopped_then_finished(_cli("export", root / "build" / "rollout", "--to", to, "--out", out,
+                                *some), duration, random.Random(f"export {to} {SEED}"))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "ref"]  # no *.partial* beside
+    files = [{str(p.relative_to(d)): _sha(p) for p in sorted(d.rglob("*"))
+              if p.is_file() and p.name != "state.json"} for d in (ref, out)]
+    assert files[0] == files[1] and "metadata.json" in files[0]
+    if to == "npz":
+        import numpy as np
+
+        assert len(files[0]) == 4  # three episodes and metadata.json
+        for name in (n for n in files[0] if n.endswith(".npz")):
+            with np.load(ref / name) as a, np.load(out / name) as b:
+                assert a.files == b.files
+                assert all(np.array_equal(a[k], b[k]) and a[k].dtype == b[k].dtype
+                           for k in a.files), name
+    else:
+        a, b = (datasets.load_from_disk(str(d / "dataset")) for d in (ref, out))
+        assert a.features == b.features and len(a) == len(b) > 0
+        assert a.data.table.equals(b.data.table)  # every row, column for column
+        del a, b
+        shutil.rmtree(tmp_path)  # 740 MB
+
+
+POLICY_RUN = ["rl", "train", "--steps", "64", "--rollout", "32", "--batch-size", "32",
+              "--episode-steps", "25", "--envs", "1"]
+MIXED = """
+name = "killed-mixed"
+seed = 3
+
+[rollout]
+env = "sim"
+agent = "reduced-random"
+episodes = 3
+layers = "paper"
+
+[sources.random]
+share = 0.5
+
+[sources.policy]
+share = 0.5
+agent = AGENT
+
+[commands.build_scv]
+text = "build an SCV"
+
+[commands.collect_minerals]
+text = "collect minerals"
+
+[pairs]
+states_per_command = 8
+null_states = 20
+
+[split]
+method = "random"
+train = 0.6
+val = 0.2
+test = 0.2
+"""
+
+
+def _policy_rollout(run: Path, out: Path) -> list[str]:
+    return _cli("rollout", "--agent", f"policy:{run}", "--episodes", "3", "--max-steps", "100",
+                "--workers", "1", "--episodes-per-shard", "1", "--out", out)
+
+
+def _rollout_content(out: Path) -> dict[str, str]:
+    """A rollout's shards by their bytes, and its index's content."""
+    import pyarrow.parquet as pq
+
+    files = {p.name: _sha(p) for p in sorted(out.glob("*.h5"))}
+    files["index.parquet"] = str(pq.read_table(out / "index.parquet").to_pydict())
+    return files
+
+
+@pytest.fixture(scope="module")
+def policy(reference: tuple[Path, Path, float, float],
+           tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, float, float]:
+    """A tiny trained rl run (``RUN``), its policy's uninterrupted rollout ``DIR/policy`` and the
+    reference build's reduced-random rollout copied to ``DIR/random``, both labelled; the mixed
+    recipe drawing from them, its uninterrupted pair set ``ROOT/pairs``; how long the rollout
+    and the pair took."""
+    root = tmp_path_factory.mktemp("kill-policy")
+    _run(_cli(*POLICY_RUN, "--out", root / "rl"))
+    sources = root / "sources"
+    rollout_s = _run(_policy_rollout(root / "rl", sources / "policy"))
+    _run(_cli("label", sources / "policy"))
+    shutil.copytree(reference[1] / "build" / "rollout", sources / "random",
+                    ignore=shutil.ignore_patterns(".lock"))
+    recipe = root / "mixed.toml"
+    recipe.write_text(MIXED.replace("AGENT", json.dumps(f"policy:{root / 'rl'}")))
+    pair_s = _run(_cli("pair", recipe, "--data", sources, "--out", root / "pairs"))
+    return root, recipe, rollout_s, pair_s
+
+
+def test_policy_rollout_stopped_anywhere_finishes_to_the_same_bytes(
+        policy: tuple[Path, Path, float, float], tmp_path: Path) -> None:
+    """``rollout --agent policy:RUN`` (the MEM loop's rollouts of a trained policy), stopped
+    anywhere and rerun: the shards equal an uninterrupted rollout's byte for byte."""
+    root, _, rollout_s, _ = policy
+    out = tmp_path / "policy"
+    _stopped_then_finished(_policy_rollout(root / "rl", out), rollout_s,
+                           random.Random(f"policy {SEED}"))
+    assert _rollout_content(out) == _rollout_content(root / "sources" / "policy")
+    assert len(list(out.glob("*.h5"))) == 3 and not list(out.glob("*.partial*"))
+    _verifies(out)
+
+
+def test_mixed_pair_stopped_anywhere_finishes_to_the_same_bytes(
+        policy: tuple[Path, Path, float, float], tmp_path: Path) -> None:
+    """``pair`` of a mixed recipe (a reduced-random source and a policy source), stopped
+    anywhere and rerun: the pairs and packed splits equal an uninterrupted run's byte for
+    byte."""
+    root, recipe, _, pair_s = policy
+    out = tmp_path / "pairs"
+    _stopped_then_finished(_cli("pair", recipe, "--data", root / "sources", "--out", out),
+                           pair_s, random.Random(f"pair {SEED}"))
+    files = [{str(p.relative_to(d)): _sha(p) for p in sorted(d.rglob("*.h5"))}
+             | {"pairs.parquet": _sha(d / "pairs.parquet")} for d in (root / "pairs", out)]
+    assert files[0] == files[1] and len(files[0]) == 4  # pairs and three packed splits
+    import pyarrow.parquet as pq
+
+    assert set(pq.read_table(out / "pairs.parquet")["source"].to_pylist()) == {"random",
+                                                                              "policy"}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["pairs"]  # nothing beside it
+    _verifies(out)

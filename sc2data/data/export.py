@@ -29,12 +29,16 @@ also has its ``available_actions``: a boolean mask over pysc2's ``actions.FUNCTI
   on transitions.
 
 The export is written under a temporary ``….partial`` name beside ``--out`` and renamed into
-place when complete, so an interrupted export leaves nothing that looks finished.
+place when complete, so an interrupted export leaves nothing that looks finished; the next
+export into that ``--out`` removes what a killed one left (``OUT.PID.partial``), and a rerun of
+an export stopped after its rename (``OUT`` already this export, by its ``metadata.json``)
+exports it again rather than refusing the existing ``OUT``.
 """
 
 from __future__ import annotations
 
 import contextlib
+import glob
 import json
 import os
 import re
@@ -52,6 +56,7 @@ from sc2data.data.dataset import Dataset
 from sc2data.data.shards import ARG_WIDTH
 from sc2data.ground.errors import MissingDependencyError, Sc2DataError, reason
 from sc2data.ground.files import PARTIAL, check_out, fsync_path, publish, writing
+from sc2data.ground.formats import loads
 from sc2data.ground.progress import bar
 from sc2data.ground.provenance import versions
 from sc2data.ground.vocab import EPISODE_STEPS
@@ -165,16 +170,18 @@ def export(data: str | os.PathLike[str], to: str, out: str | os.PathLike[str], *
     _require(to)
     src, out = Path(data), Path(out)
     name = _name(name if name is not None else src.resolve().name)
-    if out.exists() and not overwrite:
-        raise Sc2DataError(f"{out} exists; choose another --out, or pass --overwrite to "
-                           f"replace it")
-    if out.exists() and not out.is_dir():
-        raise Sc2DataError(f"{out} is a file; choose another --out")
-    check_out(out)
     t0 = time.perf_counter()
     with Dataset(src) as ds:
         ids = ds.episode_ids[:episodes].tolist()
         stacks = int(ds.n_steps[:len(ids)].sum())
+        if out.exists() and not overwrite and not _this_export(
+                out, metadata(ds, to, name, len(ids), stacks)):
+            raise Sc2DataError(f"{out} exists; choose another --out, or pass --overwrite to "
+                               f"replace it")
+        if out.exists() and not out.is_dir():
+            raise Sc2DataError(f"{out} is a file; choose another --out")
+        check_out(out)
+        _sweep(out)
         tmp = out.with_name(f"{out.name}.{os.getpid()}{PARTIAL}")
         shutil.rmtree(tmp, ignore_errors=True)
 
@@ -199,6 +206,39 @@ def export(data: str | os.PathLike[str], to: str, out: str | os.PathLike[str], *
         size = sum(p.stat().st_size for p in out.rglob("*") if p.is_file())
         return ExportSummary(out, to, len(ids), stacks, size,
                              time.perf_counter() - t0, read_with.format(out=out))
+
+
+def _this_export(out: Path, meta: dict[str, Any]) -> bool:
+    """``out`` is this very export, finished by an earlier run of the command (one stopped as it
+    exited, after the rename): its ``metadata.json`` records the same format, name, source,
+    episodes, settings and versions. A rerun then exports it again, as the line of a stopped
+    run says to (a Minari export keeps no ``metadata.json``: ``--overwrite`` replaces it)."""
+    try:
+        old = loads((out / "metadata.json").read_bytes())
+    except (OSError, ValueError):
+        return False
+    meta = json.loads(json.dumps(meta))  # as written: tuples are lists
+    return isinstance(old, dict) and all(old.get(k) == v for k, v in meta.items())
+
+
+def _sweep(out: Path) -> None:
+    """Remove what a killed export into ``out`` left beside it: ``OUT.PID.partial`` and
+    ``OUT.old.PID.partial`` of a process that no longer runs (those of a running export are
+    its own)."""
+    for path in out.parent.glob(f"{glob.escape(out.name)}.*{PARTIAL}"):
+        pid = path.name[len(out.name) + 1:-len(PARTIAL)].removeprefix("old.")
+        if pid.isdigit() and int(pid) != os.getpid() and not _running(int(pid)):
+            shutil.rmtree(path, ignore_errors=True)
+
+
+def _running(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):
+        return True
+    return True
 
 
 def _replace(tmp: Path, out: Path) -> None:

@@ -4,6 +4,7 @@ bad input is one line; an interrupted export leaves nothing that looks finished.
 from __future__ import annotations
 
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -215,3 +216,38 @@ def test_a_dataset_without_masks_exports_without_them(tmp_path: Path) -> None:
     export(old, "hf", tmp_path / "hf", progress=False)
     rows = datasets.load_from_disk(str(tmp_path / "hf" / "dataset"))
     assert "available_actions" not in rows.column_names and len(rows) == STEPS
+
+
+def test_a_rerun_after_a_kill_finishes_and_leaves_nothing_beside_out(
+        data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """What a ``kill -9`` leaves, at any moment, is no obstacle to the same command: a half-made
+    ``OUT.PID.partial`` (or the ``OUT.old.PID.partial`` of an ``--overwrite``) of a process that
+    no longer runs is removed (it used to stay beside ``--out`` for good), one of a running
+    export is left to it; and an ``OUT`` that is already this export (the kill landed after the
+    rename) is exported again, where any other ``OUT`` is still refused (issue 31)."""
+    import subprocess
+
+    out = tmp_path / "npz"
+    gone = subprocess.Popen(["true"])
+    gone.wait()
+    for stale in (f"npz.{gone.pid}.partial", f"npz.old.{gone.pid}.partial"):
+        (tmp_path / stale).mkdir()
+        (tmp_path / stale / "episode-000000.npz").write_bytes(b"half")
+    live = tmp_path / f"npz.{os.getppid()}.partial"  # a running export's: not ours to remove
+    live.mkdir()
+    argv = ["export", data, "--to", "npz", "--out", out, "--no-progress"]
+    code, _, err = run_cli(argv, capsys)
+    assert code == 0, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["npz", live.name])
+    live.rmdir()
+    first = {p.name: p.read_bytes() for p in out.iterdir()}
+    code, _, err = run_cli(argv, capsys)  # OUT is this export: made again, not refused
+    assert code == 0, err
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == first
+    assert list(tmp_path.iterdir()) == [out]
+    code, _, err = run_cli([*argv, "--episodes", "1"], capsys)  # another export: refused
+    assert_one_line_error(code, err, "exists", "--overwrite")
+    (out / "metadata.json").write_text("[]")
+    code, _, err = run_cli(argv, capsys)
+    assert_one_line_error(code, err, "exists", "--overwrite")
+    assert list(tmp_path.iterdir()) == [out]

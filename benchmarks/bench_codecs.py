@@ -26,8 +26,8 @@ import hdf5plugin
 import numpy as np
 
 from sc2data.data.chunks import Codec
-from sc2data.data.dataset import open_dataset, shard_settings, write_index, write_manifest
-from sc2data.data.rollout import RolloutConfig, index_rows, manifest_for
+from sc2data.data.dataset import open_dataset, shard_settings, write_dataset_record, write_index
+from sc2data.data.rollout import RolloutConfig, dataset_record_for, index_rows
 from sc2data.data.shards import ShardWriter
 from sc2data.game.agents import make_agent, play
 from sc2data.game.env import make_env
@@ -125,7 +125,7 @@ def build_direct(level: int, chunk: int, episodes: list[dict[str, np.ndarray]], 
         w.close()
 
     write()
-    write_manifest(folder, manifest_for(config))
+    write_dataset_record(folder, dataset_record_for(config))
     write_index(folder, index_rows(path))
     return folder, write
 

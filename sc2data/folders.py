@@ -5,10 +5,11 @@ run, a build — told apart by their files, described (``sc2data info``) and che
 ``verify`` checks everything a folder's readers rely on, by content:
 
 * a dataset (``dataset.json``): every shard chunk through its checksum, every shard's sha256
-  against the index, manifest, attributes and tables (:mod:`sc2data.data.audit`), and its labels
-  if it has any (both files against ``labels.sha256``, and that they belong together);
+  against the index, the dataset record, attributes and tables (:mod:`sc2data.data.audit`), and
+  its labels if it has any (both files against ``labels.sha256``, and that they belong together);
 * a pair set (``pairset.json``): its header, ``pairs.parquet`` and the packed splits against the
-  recorded fingerprint, each split's schema and rows, and every packed chunk through its checksum;
+  recorded pair-set fingerprint, each split's schema and rows, and every packed chunk through its
+  checksum;
 * a training run (``state.json``): every run file against its recorded sha256, and the checkpoint
   loads (an unfinished run is reported as such, not as a fault);
 * an RL run (``sc2data rl train --out``: ``config.json`` with an ``action_space``, ``model.zip``):

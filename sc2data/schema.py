@@ -229,7 +229,7 @@ class Schema:
         return out
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-able description, stored in every shard and manifest."""
+        """JSON-able description, stored in every shard and dataset record."""
         return {
             "version": self.version,
             "screen": [l.name for l in self.screen],

@@ -8,7 +8,7 @@ from pathlib import Path
 import h5py
 
 from sc2data.data.chunks import Codec
-from sc2data.data.dataset import MANIFEST, write_index, write_manifest
+from sc2data.data.dataset import DATASET_RECORD, write_dataset_record, write_index
 from sc2data.data.rollout import RolloutConfig, RolloutSummary, index_rows, rollout
 from sc2data.data.shards import MASKS
 from sc2data.testing.synthetic import pysc2_random_agent, synthetic_env_factory
@@ -34,13 +34,13 @@ def as_format(folder: Path, version: int) -> None:
     """Rewrite a dataset as an older sc2data wrote it: dataset and shard format ``version``,
     without action masks (before format 4) and with the episode count in each shard's settings
     (before format 3)."""
-    manifest = json.loads((folder / MANIFEST).read_text())
+    record = json.loads((folder / DATASET_RECORD).read_text())
     shards = sorted(folder.glob("shard-*.h5"))
     for path in shards:
         with h5py.File(path, "r+") as f:
             f.attrs["format_version"] = version
             del f[MASKS]
             if version < 3:
-                f.attrs["settings"] = json.dumps(manifest["settings"])
-    write_manifest(folder, {**manifest, "format_version": version})
+                f.attrs["settings"] = json.dumps(record["settings"])
+    write_dataset_record(folder, {**record, "format_version": version})
     write_index(folder, [row for path in shards for row in index_rows(path)])

@@ -2,7 +2,7 @@
 
 ``verify`` trusts nothing: it reads every chunk of every dataset through HDF5's own filter
 pipeline (so each fletcher32 checksum is checked), recomputes every shard's sha256 against the
-index, and cross-checks the manifest, the shards' attributes and tables, and the index.
+index, and cross-checks the dataset record, the shards' attributes and tables, and the index.
 """
 
 from __future__ import annotations
@@ -18,11 +18,11 @@ import numpy as np
 
 from sc2data._pysc2 import actions
 from sc2data.data.dataset import (
+    DATASET_RECORD,
     INDEX,
-    MANIFEST,
-    manifest_schema,
+    read_dataset_record,
     read_index,
-    read_manifest,
+    record_schema,
     shard_settings,
 )
 from sc2data.data.shards import (
@@ -86,8 +86,8 @@ def _codec(codec: Any) -> str:
 
 def info(folder: Path) -> list[str]:
     """A plain-text report: totals, settings, the schema with stored bytes per key, shards."""
-    manifest = read_manifest(folder)
-    schema = manifest_schema(manifest, folder / MANIFEST)
+    record = read_dataset_record(folder)
+    schema = record_schema(record, folder / DATASET_RECORD)
     table = read_index(folder)
     names = sorted(set(table.column("shard").to_pylist()))
     stats = [shard_stats(folder / n) for n in names]
@@ -101,12 +101,12 @@ def info(folder: Path) -> list[str]:
              f"bytes     {size:,} on disk   {per_frame:,.0f} B/frame   "
              f"(raw {schema.frame_bytes():,} B/frame, "
              f"{schema.frame_bytes() / max(per_frame, 1):,.0f}x)",
-             "settings  " + "  ".join(f"{k}={v}" for k, v in manifest["settings"].items()
+             "settings  " + "  ".join(f"{k}={v}" for k, v in record["settings"].items()
                                       if k != "codec"),
-             f"codec     {_codec(manifest['settings'].get('codec'))}",
-             f"versions  {'  '.join(f'{k} {v}' for k, v in manifest.get('versions', {}).items())}",
-             f"format    {manifest['format_version']}   action masks "
-             + ("kept (available_actions per frame)" if manifest["format_version"] >= 4
+             f"codec     {_codec(record['settings'].get('codec'))}",
+             f"versions  {'  '.join(f'{k} {v}' for k, v in record.get('versions', {}).items())}",
+             f"format    {record['format_version']}   action masks "
+             + ("kept (available_actions per frame)" if record["format_version"] >= 4
                 else "none (written before format 4)"),
              "", f"{'key':28s} {'dtype':7s} {'shape':10s} {'scale':>6s} {'kind':12s} "
                  "stored in"]
@@ -139,7 +139,7 @@ def _read_all(ds: h5py.Dataset) -> Iterator[np.ndarray]:
         yield ds[start:start + _BLOCK]
 
 
-def _check_shard(path: Path, rows: dict[str, Any], manifest: dict[str, Any],
+def _check_shard(path: Path, rows: dict[str, Any], record: dict[str, Any],
                  digest: str) -> list[str]:
     faults: list[str] = []
     try:
@@ -147,14 +147,14 @@ def _check_shard(path: Path, rows: dict[str, Any], manifest: dict[str, Any],
     except Sc2DataError as e:
         return [str(e)]
     try:
-        if shard.schema.to_dict() != manifest["schema"]:
-            faults.append(f"{path.name}: schema differs from {MANIFEST}")
-        version = manifest.get("format_version")
+        if shard.schema.to_dict() != record["schema"]:
+            faults.append(f"{path.name}: schema differs from {DATASET_RECORD}")
+        version = record.get("format_version")
         if shard.attrs.get("format_version") != version:
             faults.append(f"{path.name}: shard format {shard.attrs.get('format_version')} in a "
                           f"dataset of format {version}")
-        elif shard.attrs.get("settings") != shard_settings(manifest["settings"], version):
-            faults.append(f"{path.name}: settings differ from {MANIFEST}")
+        elif shard.attrs.get("settings") != shard_settings(record["settings"], version):
+            faults.append(f"{path.name}: settings differ from {DATASET_RECORD}")
         if rows["shard_sha256"] and any(h != digest for h in rows["shard_sha256"]):
             faults.append(f"{path.name}: sha256 {digest[:12]}… does not match the index")
         eps = shard.episodes
@@ -247,9 +247,10 @@ def _check_dataset(shard: Shard, name: str, length: int) -> list[str]:
     return []
 
 
-def check_shard(path: Path, manifest: dict[str, Any]) -> list[str]:
+def check_shard(path: Path, record: dict[str, Any]) -> list[str]:
     """Every fault of one shard on its own (no index to compare with): its header, schema and
-    settings against ``manifest``, its tables, and every chunk read through its checksum."""
+    settings against the dataset record ``record``, its tables, and every chunk read through its
+    checksum."""
     try:
         table = Shard(path)
     except Sc2DataError as e:
@@ -260,13 +261,13 @@ def check_shard(path: Path, manifest: dict[str, Any]) -> list[str]:
         table.close()
     rows: dict[str, Any] = {c: list(eps[c]) for c in eps}
     rows["shard_sha256"] = []
-    return _check_shard(path, rows, manifest, "")
+    return _check_shard(path, rows, record, "")
 
 
 def verify(folder: Path) -> list[str]:
     """Every fault found in ``folder`` (empty: intact). Unreadable basics raise Sc2DataError."""
-    manifest = read_manifest(folder)
-    manifest_schema(manifest, folder / MANIFEST)
+    record = read_dataset_record(folder)
+    record_schema(record, folder / DATASET_RECORD)
     table = read_index(folder)
     faults: list[str] = []
     by_shard: dict[str, dict[str, list[Any]]] = {}
@@ -277,7 +278,7 @@ def verify(folder: Path) -> list[str]:
     episodes = table.column("episode").to_pylist()
     if len(set(episodes)) != len(episodes):
         faults.append(f"{INDEX}: an episode is listed twice")
-    expected = manifest["settings"].get("episodes")
+    expected = record["settings"].get("episodes")
     if expected is not None and sorted(episodes) != list(range(expected)):
         faults.append(f"{INDEX}: lists {len(episodes)} episodes, the settings say {expected}")
     on_disk = {p.name for p in folder.glob("shard-*.h5")}
@@ -293,5 +294,5 @@ def verify(folder: Path) -> list[str]:
         if any(b != path.stat().st_size for b in rows["shard_bytes"]):
             faults.append(f"{name}: {path.stat().st_size} bytes, the index says "
                           f"{rows['shard_bytes'][0]}")
-        faults += _check_shard(path, rows, manifest, sha256_file(path))
+        faults += _check_shard(path, rows, record, sha256_file(path))
     return faults

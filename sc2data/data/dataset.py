@@ -37,7 +37,9 @@ from sc2data.ground.files import write_atomic
 from sc2data.ground.formats import DATASET, loads
 from sc2data.schema import Block, Index, Schema, SchemaError, StackBatch, positions
 
-MANIFEST = "dataset.json"
+DATASET_RECORD = "dataset.json"
+"""A dataset folder's record: format, settings, schema, versions, … (its shape:
+:data:`sc2data.ground.formats.DATASET`)."""
 INDEX = "index.parquet"
 INDEX_SCHEMA = pa.schema([
     ("shard", pa.string()), ("episode", pa.int64()), ("n_steps", pa.int64()),
@@ -58,9 +60,10 @@ def shard_settings(settings: dict[str, Any], version: int = DATASET.version) -> 
     return {k: v for k, v in settings.items() if version < 3 or k != "episodes"}
 
 
-def write_manifest(folder: Path, manifest: dict[str, Any]) -> None:
-    text = json.dumps(manifest, indent=2, sort_keys=True) + "\n"
-    write_atomic(folder / MANIFEST, text.encode())
+def write_dataset_record(folder: Path, record: dict[str, Any]) -> None:
+    """Write ``record`` as the folder's ``dataset.json``, atomically."""
+    text = json.dumps(record, indent=2, sort_keys=True) + "\n"
+    write_atomic(folder / DATASET_RECORD, text.encode())
 
 
 def write_index(folder: Path, rows: Sequence[dict[str, Any]]) -> None:
@@ -70,21 +73,21 @@ def write_index(folder: Path, rows: Sequence[dict[str, Any]]) -> None:
     write_atomic(folder / INDEX, sink.getvalue().to_pybytes())
 
 
-def read_manifest(folder: Path) -> dict[str, Any]:
+def read_dataset_record(folder: Path) -> dict[str, Any]:
     """``dataset.json``; a folder without one is not an sc2data dataset."""
-    path = Path(folder) / MANIFEST
+    path = Path(folder) / DATASET_RECORD
     if not Path(folder).is_dir():
         raise Sc2DataError(f"{folder} is not a folder")
     if not path.is_file():
-        raise Sc2DataError(f"{folder} is not an sc2data dataset (no {MANIFEST}); make one with "
-                           f"`sc2data rollout --out {folder}`")
+        raise Sc2DataError(f"{folder} is not an sc2data dataset (no {DATASET_RECORD}); make one "
+                           f"with `sc2data rollout --out {folder}`")
     try:
-        manifest = loads(path.read_text())
+        record = loads(path.read_text())
     except (OSError, ValueError) as e:
         raise Sc2DataError(f"{path} is unreadable ({e}); delete the folder and roll out "
                            f"again") from e
-    DATASET.check(manifest, path)
-    return manifest
+    DATASET.check(record, path)
+    return record
 
 
 def read_index(folder: Path) -> pa.Table:
@@ -106,33 +109,35 @@ IDENTITY = ("episode", "n_steps", "frame_start", "step_start", "env_seed", "agen
 """The episode-table columns a shard and the index must agree on."""
 
 
-def shard_fault(shard: Shard, rows: dict[str, np.ndarray], manifest: dict[str, Any]
+def shard_fault(shard: Shard, rows: dict[str, np.ndarray], record: dict[str, Any]
                 ) -> str | None:
-    """Why ``shard`` is not the one ``manifest`` and the index ``rows`` (its episodes, sorted)
-    describe — its format version, settings, schema or episode table — or None."""
-    version = manifest.get("format_version")
+    """Why ``shard`` is not the one the dataset record ``record`` and the index ``rows`` (its
+    episodes, sorted) describe — its format version, settings, schema or episode table — or None."""
+    version = record.get("format_version")
     if shard.attrs.get("format_version") != version:
         return f"shard format {shard.attrs.get('format_version')} in a dataset of format {version}"
-    if shard.attrs.get("settings") != shard_settings(manifest["settings"], version):
-        return f"its settings differ from {MANIFEST}'s"
-    if shard.attrs.get("schema") != manifest["schema"]:
-        return f"its schema differs from {MANIFEST}'s"
+    if shard.attrs.get("settings") != shard_settings(record["settings"], version):
+        return f"its settings differ from {DATASET_RECORD}'s"
+    if shard.attrs.get("schema") != record["schema"]:
+        return f"its schema differs from {DATASET_RECORD}'s"
     for col in IDENTITY:
         if not np.array_equal(np.asarray(shard.episodes[col]), rows[col]):
             return f"its episode table ({col}) differs from {INDEX}"
     return None
 
 
-def manifest_schema(manifest: dict[str, Any], where: Path) -> Schema:
+def record_schema(record: dict[str, Any], where: Path) -> Schema:
+    """The schema a dataset record holds; a one-line error naming ``where`` if it is invalid."""
     try:
-        return Schema.from_dict(manifest["schema"])
+        return Schema.from_dict(record["schema"])
     except (SchemaError, KeyError, ValueError) as e:
         raise Sc2DataError(f"{where}: {e}") from None
 
 
-def manifest_codec(manifest: dict[str, Any], where: Path) -> Codec:
+def record_codec(record: dict[str, Any], where: Path) -> Codec:
+    """The codec in a dataset record's settings; a one-line error naming ``where`` if invalid."""
     try:
-        codec = Codec.from_dict(manifest["settings"]["codec"])
+        codec = Codec.from_dict(record["settings"]["codec"])
     except (KeyError, TypeError, ValueError) as e:
         raise Sc2DataError(f"{where}: no valid codec in its settings ({e!r}); regenerate the "
                            f"dataset with this sc2data") from None
@@ -212,8 +217,9 @@ class Dataset:
                  max_open: int | None = None) -> None:
         keep_freed_memory()
         self.folder = Path(folder)
-        self.manifest = read_manifest(self.folder)
-        self.schema = manifest_schema(self.manifest, self.folder / MANIFEST)
+        self.record: dict[str, Any] = read_dataset_record(self.folder)
+        """The dataset record (``dataset.json``): format, settings, schema, versions, …"""
+        self.schema = record_schema(self.record, self.folder / DATASET_RECORD)
         self.index = read_index(self.folder)
         cols = {c: self.index.column(c).to_numpy() for c in
                 ("episode", "n_steps", "frame_start", "step_start")}
@@ -234,7 +240,7 @@ class Dataset:
         self._cache = _ChunkCache(cache_bytes)
         self._decoder = ChunkDecoder()
         self._blocks = self.schema.blocks()
-        self._chunk_frames = manifest_codec(self.manifest, self.folder / MANIFEST).chunk_frames
+        self._chunk_frames = record_codec(self.record, self.folder / DATASET_RECORD).chunk_frames
         self._frame_layout: dict[str, tuple[tuple[int, ...], np.dtype]] = {
             l.key: ((self.schema.size(l.group),) * 2, l.dtype) for l in self.schema.layers}
         self._frame_layout.update({v.name: ((v.size,), v.dtype) for v in self.schema.vectors})
@@ -294,13 +300,13 @@ class Dataset:
 
     @property
     def settings(self) -> dict[str, Any]:
-        return dict(self.manifest["settings"])
+        return dict(self.record["settings"])
 
     @property
     def has_masks(self) -> bool:
         """Whether the dataset keeps each frame's ``available_actions`` (format 4 on): then
         :meth:`actions` gives ``available`` and ``next_available``."""
-        return int(self.manifest["format_version"]) >= 4
+        return int(self.record["format_version"]) >= 4
 
     def _shard(self, i: int) -> Shard:
         shard = self._open.get(i)
@@ -328,7 +334,7 @@ class Dataset:
         shard = None
         if fault is None:
             shard = Shard(path)
-            fault = shard_fault(shard, rows, self.manifest)
+            fault = shard_fault(shard, rows, self.record)
         if fault is not None:
             if shard is not None:
                 shard.close()
@@ -391,7 +397,7 @@ class Dataset:
             for b, (block, buf) in enumerate(zip(blocks, bufs, strict=True)):
                 src = shard.frames(block.name)
                 if src.chunk_frames != c or src.frame_shape != block.frame_shape:
-                    raise Sc2DataError(f"{src.where} is chunked or shaped unlike {MANIFEST} "
+                    raise Sc2DataError(f"{src.where} is chunked or shaped unlike {DATASET_RECORD} "
                                        f"says; run `sc2data verify` on {self.folder}")
                 missing: list[int] = []
                 for j, i in enumerate(u_chunk[lo:hi].tolist(), lo):

@@ -34,15 +34,15 @@ from sc2data._pysc2 import base_agent, environment
 from sc2data.data.audit import check_shard
 from sc2data.data.chunks import Codec
 from sc2data.data.dataset import (
+    DATASET_RECORD,
     INDEX,
-    MANIFEST,
     keep_freed_memory,
+    read_dataset_record,
     read_index,
-    read_manifest,
     shard_name,
     shard_settings,
+    write_dataset_record,
     write_index,
-    write_manifest,
 )
 from sc2data.data.shards import Shard, ShardWriter
 from sc2data.game import env as envs
@@ -284,7 +284,7 @@ def write_shard(config: RolloutConfig, out: Path, env_factory: EnvFactory,
 
 
 # -- the folder ---------------------------------------------------------------------------------
-def manifest_for(config: RolloutConfig) -> dict[str, Any]:
+def dataset_record_for(config: RolloutConfig) -> dict[str, Any]:
     return {**DATASET.header(),
             "settings": config.settings(), "schema": config.schema.to_dict(),
             "versions": versions(), "map": MAP_NAME, "n_shards": config.n_shards}
@@ -294,7 +294,7 @@ def folder_config(out: Path) -> RolloutConfig | None:
     """The settings of the dataset in ``out``, if it holds a readable one: what a rollout into it
     takes for the settings it is not given."""
     try:
-        return RolloutConfig.from_settings(read_manifest(out)["settings"])
+        return RolloutConfig.from_settings(read_dataset_record(out)["settings"])
     except (Sc2DataError, KeyError, TypeError):
         return None
 
@@ -304,8 +304,8 @@ def check_folder(config: RolloutConfig, out: Path) -> None:
     settings, or fewer episodes than the folder holds (or is growing to)."""
     if out.exists() and not out.is_dir():
         raise Sc2DataError(f"output {out} exists and is not a folder; choose another --out")
-    if out.is_dir() and (out / MANIFEST).exists():
-        old = read_manifest(out)
+    if out.is_dir() and (out / DATASET_RECORD).exists():
+        old = read_dataset_record(out)
         if old["format_version"] != DATASET.version:
             raise Sc2DataError(f"{out} has dataset format {old['format_version']}, which this "
                                f"sc2data reads and verifies but does not add to (it writes "
@@ -342,7 +342,7 @@ def create_folder(out: Path) -> None:
 
 
 def prepare_folder(config: RolloutConfig, out: Path) -> tuple[list[int], int | None]:
-    """Check the complete shards, then write the manifest (if new or growing) and drop stale
+    """Check the complete shards, then write the dataset record (if new or growing) and drop stale
     partials; return the shards to write and, when a finished dataset grows, its episodes.
 
     Everything is checked before anything changes, so a refusal leaves the folder as it was. A
@@ -350,14 +350,15 @@ def prepare_folder(config: RolloutConfig, out: Path) -> tuple[list[int], int | N
     rollout, which the same command finishes, to the same bytes, after any interruption.
     """
     check_folder(config, out)  # again, under the lock
-    had = read_manifest(out)["settings"]["episodes"] if (out / MANIFEST).exists() else None
+    had = read_dataset_record(out)["settings"]["episodes"] if (out / DATASET_RECORD).exists() \
+        else None
     recorded = _recorded_hashes(out)
     todo = [i for i in range(config.n_shards) if not (out / shard_name(i)).exists() or
             not check_kept(config, out / shard_name(i), i, recorded.get(shard_name(i)))]
     grew = had is not None and had < config.episodes and (out / INDEX).exists()
     if had != config.episodes:
         (out / INDEX).unlink(missing_ok=True)
-        write_manifest(out, manifest_for(config))
+        write_dataset_record(out, dataset_record_for(config))
     for stale in out.glob(f"*{PARTIAL}"):
         if stale.is_dir():  # an attempt folder of a Ray task (sc2data.scaleout.driver)
             shutil.rmtree(stale)
@@ -406,7 +407,7 @@ def check_kept(config: RolloutConfig, path: Path, i: int, recorded_sha256: str |
             raise refuse(f"does not match the sha256 {INDEX} recorded when it was written "
                          f"(damaged or replaced)")
         return True
-    faults = check_shard(path, manifest_for(config))
+    faults = check_shard(path, dataset_record_for(config))
     if faults:
         raise refuse(f"is damaged ({faults[0]})")
     return True

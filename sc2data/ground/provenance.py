@@ -1,4 +1,4 @@
-"""What every shard and manifest records about where it came from."""
+"""What every shard and dataset record (``dataset.json``) keeps of where it came from."""
 
 from __future__ import annotations
 

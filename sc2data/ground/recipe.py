@@ -161,7 +161,7 @@ class Recipe:
         return tuple(s.share for s in self.sources) or (1.0,)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-able form recorded in every manifest and pair set (``source`` left out)."""
+        """JSON-able form recorded in every pair set (``source`` left out)."""
         d = asdict(self)
         d.pop("source")
         for c in d["commands"]:  # absent when empty: older recipes keep their identity

@@ -91,16 +91,19 @@ def long_form(wide: pa.Table, rules: Sequence[Registered]) -> pa.Table:
                           ("_order", "ascending")]).drop_columns(["_order"])
 
 
-def fingerprint(rules: Sequence[Registered], info: dict[str, Any]) -> str:
-    """Same rules (id, version, code) on the same dataset ⇒ same fingerprint ⇒ resumable."""
+def labels_fingerprint_for(rules: Sequence[Registered], info: dict[str, Any]) -> str:
+    """The labels fingerprint of ``rules`` on the source ``info`` describes (its dataset
+    fingerprint; the whole ``info`` for a source without one): same rules (id, version, code) on
+    the same dataset ⇒ same fingerprint ⇒ resumable."""
     return labels_fingerprint(info.get("fingerprint", info),
                               [(e.id, e.rule.version, e.code_sha256) for e in rules])
 
 
-def labels_fingerprint(dataset: Any, rules: Sequence[tuple[Any, ...]]) -> str:
-    """:func:`fingerprint` from the dataset's fingerprint and (id, version, code sha256) per
+def labels_fingerprint(dataset_fingerprint: Any, rules: Sequence[tuple[Any, ...]]) -> str:
+    """The labels fingerprint, from the dataset fingerprint and (id, version, code sha256) per
     rule, as a label record lists them."""
-    doc = {"format": FORMAT_VERSION, "dataset": dataset, "rules": [list(r) for r in rules]}
+    doc = {"format": FORMAT_VERSION, "dataset": dataset_fingerprint,
+           "rules": [list(r) for r in rules]}
     return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()
 
 
@@ -112,8 +115,8 @@ def write_part(unit: WorkUnit, rules: Sequence[Registered], keys: Sequence[str],
 
 
 def parts_run(state: Path) -> str | None:
-    """The fingerprint of the run a parts folder belongs to (its ``state.json``); None if it has
-    none sc2data can read, so its parts are not resumed."""
+    """The labels fingerprint of the run a parts folder belongs to (its ``state.json``); None if
+    it has none sc2data can read, so its parts are not resumed."""
     try:
         record = loads(state.read_text())
     except (OSError, ValueError):

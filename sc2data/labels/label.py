@@ -30,8 +30,8 @@ from sc2data.ground.provenance import versions
 from sc2data.ground.resume import STATE, differences
 from sc2data.labels.apply import (
     check_requirements,
-    fingerprint,
     label_batches,
+    labels_fingerprint_for,
     long_form,
     null_multi,
     part_sums,
@@ -113,31 +113,31 @@ def label(source: Source, rules: Sequence[Registered], out_dir: Path | str, *,
     if not rules:
         raise Sc2DataError("no rules to label with")
     check_requirements(rules, source.schema, f"the dataset at {out}")
-    fp = fingerprint(rules, source.info)
-    done = _existing(out, fp)
+    labels_fp = labels_fingerprint_for(rules, source.info)
+    done = _existing(out, labels_fp)
     if done is not None:
         return done
     _check_replacing(out, rules, overwrite)
     try:
         out.mkdir(parents=True, exist_ok=True)
         with FolderLock(out, "label"):
-            return _run(source, rules, out, fp, batch_size, progress, run_units)
+            return _run(source, rules, out, labels_fp, batch_size, progress, run_units)
     except OSError as e:
         raise Sc2DataError(f"cannot write labels in {out}: {reason(e)}; check the folder "
                            f"is writable and has space") from e
 
 
-def _run(source: Source, rules: Sequence[Registered], out: Path, fp: str, batch_size: int,
+def _run(source: Source, rules: Sequence[Registered], out: Path, labels_fp: str, batch_size: int,
          progress: bool | None, run_units: UnitRunner | None = None) -> LabelSummary:
 
     keys = required_keys(rules, source.schema)
     parts = out / PARTS_DIR
     state = parts / STATE
-    if parts.is_dir() and parts_run(state) != fp:
+    if parts.is_dir() and parts_run(state) != labels_fp:
         shutil.rmtree(parts)  # parts of other rules or another dataset: not resumable
     parts.mkdir(parents=True, exist_ok=True)
     if not state.is_file():
-        write_atomic(state, json.dumps({"fingerprint": fp}).encode())
+        write_atomic(state, json.dumps({"fingerprint": labels_fp}).encode())
 
     names = [_part_name(u.key) for u in source.units]
     if len(set(names)) != len(names):
@@ -158,7 +158,7 @@ def _run(source: Source, rules: Sequence[Registered], out: Path, fp: str, batch_
     any_count, multi = null_multi(wide, rules)
     meta = {
         "format": FORMAT_VERSION,
-        "fingerprint": fp,
+        "fingerprint": labels_fp,
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "dataset": source.info,
         "rules": [e.to_dict() for e in rules],
@@ -211,15 +211,15 @@ def _summary(out: Path, meta: dict[str, Any], resumed: int = 0,
                         up_to_date=up_to_date)
 
 
-def _existing(out: Path, fp: str) -> LabelSummary | None:
+def _existing(out: Path, labels_fp: str) -> LabelSummary | None:
     """The summary of labels already made by the same rules from the same data, if any."""
     try:
         meta = read_meta(out)
         other = file_meta(out / STACKS_FILE)
     except Sc2DataError:
         return None
-    if meta.get("fingerprint") != fp or other.get("created") != meta.get("created") or \
-            other.get("fingerprint") != fp:
+    if meta.get("fingerprint") != labels_fp or other.get("created") != meta.get("created") or \
+            other.get("fingerprint") != labels_fp:
         return None
     return _summary(out, meta, up_to_date=True)
 

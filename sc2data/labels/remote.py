@@ -15,7 +15,7 @@ from sc2data.ground.files import PARTIAL
 from sc2data.ground.progress import Bar
 from sc2data.ground.resume import STATE
 from sc2data.ground.workers import run_parallel
-from sc2data.labels.apply import fingerprint, parts_run, write_part
+from sc2data.labels.apply import labels_fingerprint_for, parts_run, write_part
 from sc2data.labels.registry import Registered, load_registry
 from sc2data.labels.source import Source, WorkUnit, dataset_source
 
@@ -25,7 +25,7 @@ Selection = tuple[tuple[str, ...] | None, tuple[str, ...], str | None]
 @functools.lru_cache(maxsize=4)
 def _rules_and_source(data: str, selection: Selection, run: str
                       ) -> tuple[Sequence[Registered], Source]:
-    """Loaded once per worker process and run (``run``: the run's fingerprint, so a process
+    """Loaded once per worker process and run (``run``: the run's labels fingerprint, so a process
     that outlives a run, as Ray's do, reloads for the next)."""
     include, exclude, rules_dir = selection
     return load_registry(rules_dir).select(include, exclude), dataset_source(data)
@@ -41,7 +41,7 @@ def label_unit(data: str, selection: Selection, unit_key: str, part: str,
     run = str(parts_run(Path(part).parent / STATE))
     rules, source = _rules_and_source(data, (None if include is None else tuple(include),
                                              tuple(exclude), rules_dir), run)
-    if fingerprint(rules, source.info) != run:
+    if labels_fingerprint_for(rules, source.info) != run:
         raise Sc2DataError(f"{socket.gethostname()} sees other rules or other data than the run "
                            f"that started this label; install the same sc2data and rule "
                            f"plugins on every node and share the dataset folder")

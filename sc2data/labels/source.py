@@ -44,7 +44,8 @@ class Source:
     units: Sequence[WorkUnit]
     schema: Schema
     info: dict[str, Any] = field(default_factory=dict)
-    """JSON-able description of the dataset (path, fingerprint, …), stored with the labels."""
+    """JSON-able description of the dataset (path, its dataset fingerprint as ``fingerprint``,
+    …), stored with the labels."""
 
 
 def dataset_source(path: Path | str) -> Source:
@@ -91,9 +92,9 @@ def dataset_source(path: Path | str) -> Source:
     units = [WorkUnit(key=f"{name}:{info['sha256']}", stacks=sum(n for _, n in info["episodes"]),
                   batches=reader(name, info["sha256"], sorted(info["episodes"])))
              for name, info in sorted(shards.items())]
-    fingerprint = hashlib.sha256(json.dumps(
+    dataset_fingerprint = hashlib.sha256(json.dumps(
         [ds.schema.to_dict(), sorted((u.key for u in units))]).encode()).hexdigest()
-    info = {"path": str(Path(path).resolve()), "fingerprint": fingerprint,
+    info = {"path": str(Path(path).resolve()), "fingerprint": dataset_fingerprint,
             "episodes": int(len(ds.episode_ids)), "stacks": len(ds),
             "settings": ds.settings, "schema": ds.schema.to_dict()}
     return Source(units, ds.schema, info)

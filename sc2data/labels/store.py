@@ -10,7 +10,7 @@
 label file is an error wherever it is read, never a different pair set.
 
 Both carry the same JSON under the Parquet metadata key ``sc2data.labels``: the rules' ids,
-versions, texts, sources and code hashes, the dataset they came from, the counts and a
+versions, texts, sources and code hashes, the dataset they came from, the counts and the labels
 fingerprint; :func:`read_labels` refuses a pair of files whose fingerprints differ.
 """
 

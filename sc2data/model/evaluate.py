@@ -117,15 +117,15 @@ def evaluate(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = 
     """Compute every metric for ``run`` on its pair set (or ``data``); write RUN/eval.json.
 
     ``texts`` are extra phrasings to measure, each ``"PHRASE=command_id"``. A pair set other than
-    the one the run was trained on (another fingerprint: re-split or re-drawn, so its test split may
-    hold training states) is refused unless ``other_data``; its report then goes to
-    ``RUN/eval-<fingerprint>.json`` and the run's own ``eval.json`` is kept. ``progress``: a
+    the one the run was trained on (another pair-set fingerprint: re-split or re-drawn, so its
+    test split may hold training states) is refused unless ``other_data``; its report then goes
+    to ``RUN/eval-<fingerprint>.json`` and the run's own ``eval.json`` is kept. ``progress``: a
     bar per split embedded (see :func:`sc2data.ground.progress.bar`).
     """
     run = Path(run)
     scorer = load_model(run, device, allow_unfinished=allow_unfinished)
     pairset = _pairset(scorer, data)
-    own = pairset.fingerprint == scorer.meta.get("data_fingerprint")
+    own = pairset.pairset_fingerprint == scorer.meta.get("data_fingerprint")
     if not own and not other_data:
         raise Sc2DataError(f"{pairset.path} is not the pair set {run} was trained on (another "
                            f"fingerprint: its test split may hold training states); pass "
@@ -138,9 +138,8 @@ def evaluate(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = 
     canon = pairset.texts()
     canon_e = scorer.embed_texts([canon[i] for i in ids])
     report: dict[str, Any] = {"run": str(run), "data": str(pairset.path),
-                              "data_fingerprint": pairset.fingerprint,
-                              "same_data_as_training":
-                                  pairset.fingerprint == scorer.meta.get("data_fingerprint"),
+                              "data_fingerprint": pairset.pairset_fingerprint,
+                              "same_data_as_training": own,
                               "threshold": thr, "paper": PAPER, "splits": {}}
     for split in SPLITS:
         pairs = pairset.pairs(split)
@@ -161,14 +160,15 @@ def evaluate(run: str | os.PathLike[str], data: str | os.PathLike[str] | None = 
         if split == "test":
             r["phrasings"] = _phrasings(scorer, states, pairs, pairset, canon_e, ids, extra, thr)
         report["splits"][split] = r
-    report["written_to"] = str(report_path(run, pairset.fingerprint, own))
+    report["written_to"] = str(report_path(run, pairset.pairset_fingerprint, own))
     write_atomic(Path(report["written_to"]), json.dumps(report, indent=2).encode())
     return report
 
 
-def report_path(run: Path, fingerprint: str, own: bool) -> Path:
-    """``RUN/eval.json`` for the run's own pair set, ``RUN/eval-<fingerprint[:12]>.json`` else."""
-    return run / (EVAL if own else f"eval-{fingerprint[:12]}.json")
+def report_path(run: Path, pairset_fingerprint: str, own: bool) -> Path:
+    """``RUN/eval.json`` for the run's own pair set, else ``RUN/eval-<f[:12]>.json`` for the
+    pair-set fingerprint ``f``."""
+    return run / (EVAL if own else f"eval-{pairset_fingerprint[:12]}.json")
 
 
 def _pairset(scorer: MEMScorer, data: str | os.PathLike[str] | None) -> PairSet:

@@ -14,7 +14,7 @@ through a trained MLP. Either way every text of the pair set — canonical, trai
 held-out paraphrases — is checked before training starts (an LSTM text with no known word is an
 error), and each distinct text is encoded once per run, not per batch.
 
-RUN receives ``config.json`` (this config, the model's architecture, the data's fingerprint, the
+RUN receives ``config.json`` (this config, the model's architecture, the pair-set fingerprint, the
 text encoder's source and digest, versions), ``metrics.jsonl`` (one line per epoch), ``best.pt``,
 ``last.pt`` (the state to resume from: model, optimiser, random generators) and ``state.json``
 (epochs done, finished or not, and every run file's sha256, so a damaged file is caught where it is
@@ -359,13 +359,13 @@ class _Trainer:
 
 def _run_config(cfg: TrainConfig, trainer: _Trainer, data: PairSet, *, texts: _Texts,
                 run: Path) -> dict[str, Any]:
-    """``config.json``: the settings, the model's architecture, the data's fingerprint, the
-    text encoder's source and digest, and what the run used."""
+    """``config.json``: the settings, the model's architecture, the pair-set fingerprint (as
+    ``data_fingerprint``), the text encoder's source and digest, and what the run used."""
     import torch
 
     words, model = texts.words, trainer.model
     return {**asdict(cfg), "model": asdict(trainer.mcfg), "run": str(run),
-            "data_fingerprint": data.fingerprint, "recipe_name": data.recipe_name,
+            "data_fingerprint": data.pairset_fingerprint, "recipe_name": data.recipe_name,
             "text_source": texts.source, "text_digest": texts.digest,
             **({"vectors_source": words.source, "vectors_digest": texts.digest,
                 "vocab": len(words.words), "word_dim": words.dim} if words else
@@ -388,7 +388,7 @@ def _checkpoint_meta(config: dict[str, Any], data: PairSet, texts: _Texts) -> di
         sentence_state["embeddings"] = torch.from_numpy(sentence_state["embeddings"])
     return {"config": config, "vectors_source": texts.source, "vectors_digest": texts.digest,
             **({"sentences": sentence_state} if texts.sentences else {}),
-            "data_fingerprint": data.fingerprint, "commands": data.commands,
+            "data_fingerprint": data.pairset_fingerprint, "commands": data.commands,
             "words": texts.words.words if texts.words else ()}
 
 

@@ -24,11 +24,13 @@ def packed_path(folder: Path, split: str) -> Path:
 
 
 def content_files(folder: Path) -> list[Path]:
-    """The files the fingerprint covers, in order."""
+    """The files the pair-set fingerprint covers, in order."""
     return [folder / PAIRS_FILE] + [packed_path(folder, s) for s in SPLITS]
 
 
-def fingerprint(folder: Path) -> str:
+def pairset_fingerprint(folder: Path) -> str:
+    """The pair-set fingerprint: the sha256 over the folder's :func:`content_files` (recorded as
+    ``fingerprint`` in ``pairset.json``, and as ``data_fingerprint`` by a run trained on it)."""
     return sha256_files(content_files(folder))
 
 
@@ -37,7 +39,7 @@ def check_content(folder: Path, recorded: str) -> None:
     missing = [p.relative_to(folder) for p in content_files(folder) if not p.is_file()]
     if missing:
         raise Sc2DataError(f"{folder} lacks {', '.join(map(str, missing))}; rerun sc2data pair")
-    if fingerprint(folder) != recorded:
+    if pairset_fingerprint(folder) != recorded:
         raise Sc2DataError(f"{folder}: pairs.parquet or a packed split is damaged or was "
                            f"replaced (the files' sha256 differs from {META_FILE}); rerun "
                            f"sc2data pair, which rebuilds it")

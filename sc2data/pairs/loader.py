@@ -70,12 +70,12 @@ class PairSet:
         try:
             self.schema = Schema.from_dict(self.meta["schema"])
             self.commands: list[dict[str, Any]] = list(self.meta["commands"])
-            self.fingerprint = str(self.meta["fingerprint"])
+            self.pairset_fingerprint = str(self.meta["fingerprint"])
         except SchemaError as e:
             raise Sc2DataError(f"{meta_path}: {e}") from None
         except (KeyError, TypeError) as e:
             raise Sc2DataError(f"{meta_path} lacks the field {e}; rebuild the pair set") from None
-        check_content(self.path, self.fingerprint)
+        check_content(self.path, self.pairset_fingerprint)
         self.recipe_name = str(self.meta.get("recipe_name", "pairs"))
         self._table = self._read_pairs()
 

@@ -28,7 +28,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from sc2data.data.dataset import Dataset, open_dataset, read_index, read_manifest
+from sc2data.data.dataset import Dataset, open_dataset, read_dataset_record, read_index
 from sc2data.ground.errors import Sc2DataError, reason
 from sc2data.ground.files import (
     PARTIAL,
@@ -37,7 +37,6 @@ from sc2data.ground.files import (
     fsync_path,
     publish,
     sha256_file,
-    sha256_files,
     write_atomic,
 )
 from sc2data.ground.formats import PAIRSET, loads
@@ -56,6 +55,7 @@ from sc2data.pairs.layout import (
     check_content,
     content_files,
     packed_path,
+    pairset_fingerprint,
 )
 from sc2data.pairs.packed import PackedWriter
 from sc2data.schema import StackBatch
@@ -173,7 +173,7 @@ def grow_command(data: Path, episodes: int, rules: list[dict[str, Any]]) -> str:
 def _identity(recipe: Recipe, labels_meta: dict[str, Any],
               sources: list[dict[str, Any]] | None = None) -> dict[str, Any]:
     """What decides a pair set's content: the recipe and the labels it was drawn from (their
-    fingerprint: the same rules' code on the same shards, so the same labels; never when they
+    labels fingerprint: the same rules' code on the same shards, so the same labels; never when they
     were made, so a relabel with identical content keeps the pair set); with several
     ``sources`` (their labels' records), every source's labels by name."""
     labels = labels_meta.get("fingerprint") if sources is None else \
@@ -241,8 +241,8 @@ def _relabelled(out: Path, identity: dict[str, Any], labels_meta: dict[str, Any]
         return None
     rules = [(r.get("id"), r.get("version"), r.get("code_sha256"))
              for r in meta.get("labels", {}).get("rules") or [] if isinstance(r, dict)]
-    shards = labels_meta.get("dataset", {}).get("fingerprint")
-    if labels_fingerprint(shards, rules) != stored.get("labels"):
+    dataset_fingerprint = labels_meta.get("dataset", {}).get("fingerprint")
+    if labels_fingerprint(dataset_fingerprint, rules) != stored.get("labels"):
         return None  # drawn from other shards, or the record does not say
     try:
         check_content(out, str(meta["fingerprint"]))
@@ -351,7 +351,7 @@ def _check_sources(recipe: Recipe, data: Path) -> tuple[list[Labelled], list[dic
                                    f"--agent {source.rollout.agent} --episodes "
                                    f"{source.rollout.episodes} --out {folder}, then sc2data "
                                    f"label {folder}")
-            manifest = read_manifest(folder)
+            dataset_record = read_dataset_record(folder)
             _check_shards(folder)
             found, meta = labelled_stacks(recipe, folder, source.rollout)
         except Sc2DataError as e:
@@ -359,8 +359,8 @@ def _check_sources(recipe: Recipe, data: Path) -> tuple[list[Labelled], list[dic
         rules = {r["id"]: r.get("code_sha256") for r in meta.get("rules", [])
                  if r.get("id") in recipe.rule_ids}
         if first is None:
-            first = (source.name, manifest["schema"], rules)
-        elif manifest["schema"] != first[1]:
+            first = (source.name, dataset_record["schema"], rules)
+        elif dataset_record["schema"] != first[1]:
             raise Sc2DataError(f"source {source.name} ({folder}) holds other layers than source "
                                f"{first[0]}; their stacks cannot be paired together: roll it out "
                                f"with the same layers")
@@ -386,7 +386,7 @@ def make_pairset(recipe: Recipe, data: str | os.PathLike[str], out: str | os.Pat
         labels_meta = sources[0]
         drawn = _draw(recipe, labelled, data, labels_meta)  # too few states: before any lock
     else:
-        read_manifest(data)  # the dataset's own record first, then its labels
+        read_dataset_record(data)  # the dataset's own record first, then its labels
         one, labels_meta = labelled_stacks(recipe, data)
         labelled, sources = [one], []
     try:
@@ -484,7 +484,7 @@ def _make(recipe: Recipe, data: Path, out: Path, labelled: list[Labelled],
                 for s, f, d in zip(recipe.sources, folders, datasets)]},
             "labels": {"fingerprint": identity["labels"], "rules": labels_meta.get("rules")},
             "identity": identity,
-            "fingerprint": sha256_files(files),
+            "fingerprint": pairset_fingerprint(tmp),
             "versions": versions(),
         }
         (tmp / META_FILE).write_text(json.dumps(meta, indent=2, default=str))

@@ -19,7 +19,7 @@ so the object pickles into ``DataLoader`` workers and each opens its own file. P
 compressed in blocks of 256 stacks: :func:`block_order` gives a shuffled order that reads each
 block once per epoch, where ``shuffle=True`` decodes a block for every pair.
 
-The pair set is checked by content when the object is made (its fingerprint, and the packed
+The pair set is checked by content when the object is made (its pair-set fingerprint, and the packed
 split against its pairs), and again before an item is read whenever ``pairs.parquet`` or the
 split's packed file changed since (another inode, size or modification time): the same bytes
 read on, other bytes (a folder rebuilt or replaced) are a one-line error, never new states
@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from sc2data.ground.errors import MissingDependencyError, Sc2DataError
-from sc2data.pairs.layout import PAIRS_FILE, fingerprint, packed_path
+from sc2data.pairs.layout import PAIRS_FILE, packed_path, pairset_fingerprint
 from sc2data.pairs.loader import SPLITS, PairSet
 from sc2data.pairs.packed import BLOCK
 
@@ -71,7 +71,7 @@ class PairDataset(Dataset):
         pairs = pairset.pairs(split)
         with pairset.packed(split):  # the packed file against the pair set's schema and rows
             pass
-        self.fingerprint = pairset.fingerprint
+        self.pairset_fingerprint = pairset.pairset_fingerprint
         """The pair set's content as checked here: what every later read must still be."""
         self._signature = self._stat()
         if self._signature != before:
@@ -108,7 +108,8 @@ class PairDataset(Dataset):
         bytes are an error."""
         now = self._stat()
         try:
-            same = now is not None and fingerprint(self.path) == self.fingerprint
+            same = now is not None and \
+                pairset_fingerprint(self.path) == self.pairset_fingerprint
         except OSError:
             same = False
         if not same:

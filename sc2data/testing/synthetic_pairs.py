@@ -22,7 +22,7 @@ import pyarrow.parquet as pq
 from sc2data._pysc2 import features, units
 from sc2data.ground.formats import PAIRSET
 from sc2data.ground.recipe import Command
-from sc2data.pairs.layout import fingerprint
+from sc2data.pairs.layout import pairset_fingerprint
 from sc2data.pairs.packed import PackedWriter
 from sc2data.schema import Schema, StackBatch
 
@@ -249,7 +249,7 @@ def write_pairset(out: str | Path, states_per_command: int = 40, null_states: in
                    "null_states": null_states, "episodes": episodes},
         "recipe_name": "synthetic", "seed": seed, "schema": schema.to_dict(),
         "commands": [dict(c) for c in commands], "splits": counts,
-        "fingerprint": fingerprint(out), "versions": {},
+        "fingerprint": pairset_fingerprint(out), "versions": {},
     }
     (out / "pairset.json").write_text(json.dumps(meta, indent=2))
     return out

@@ -126,8 +126,8 @@ def test_folder_of_an_older_format(copy: Path, capsys: pytest.CaptureFixture[str
     """A folder written before frames were stored in blocks (dataset and shard format 1):
     every command refuses it in one line, naming the format (verify: as its fault), and a rerun
     changes nothing."""
-    manifest = json.loads((copy / "dataset.json").read_text())
-    (copy / "dataset.json").write_text(json.dumps({**manifest, "format_version": 1}))
+    record = json.loads((copy / "dataset.json").read_text())
+    (copy / "dataset.json").write_text(json.dumps({**record, "format_version": 1}))
     before = {p.name: p.read_bytes() for p in copy.iterdir()}
     for args in (["info", copy],
                  ["rollout", "--out", copy, "--env", "sim", "--agent", "random", "--episodes",
@@ -137,7 +137,7 @@ def test_folder_of_an_older_format(copy: Path, capsys: pytest.CaptureFixture[str
     code, _, err = cli(["verify", copy], capsys)
     assert code == 1 and err.startswith("FAULT ") and "has dataset format 1, not 4" in err
     assert {p.name: p.read_bytes() for p in copy.iterdir()} == before
-    (copy / "dataset.json").write_text(json.dumps(manifest))
+    (copy / "dataset.json").write_text(json.dumps(record))
     with h5py.File(copy / "shard-00001.h5", "r+") as f:
         f.attrs["format_version"] = 1
     code, _, err = cli(["info", copy], capsys)

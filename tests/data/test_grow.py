@@ -16,7 +16,7 @@ import pytest
 
 import sc2data
 from sc2data.data.audit import verify
-from sc2data.data.dataset import INDEX, MANIFEST, read_manifest
+from sc2data.data.dataset import DATASET_RECORD, INDEX, read_dataset_record
 from sc2data.ground.errors import Sc2DataError
 from tests.cli import assert_one_line_error, run_cli
 from tests.synthetic_data import as_format, make_dataset
@@ -45,7 +45,7 @@ def test_a_grown_dataset_is_byte_for_byte_a_fresh_one(tmp_path: Path, small: int
     assert s.shards_written == -(-large // 2) - kept
     make_dataset(fresh, episodes=large)
     assert sums(grown) == sums(fresh) and verify(grown) == []
-    assert sorted(sums(grown)) == [MANIFEST, INDEX, *(f"shard-{i:05d}.h5" for i in
+    assert sorted(sums(grown)) == [DATASET_RECORD, INDEX, *(f"shard-{i:05d}.h5" for i in
                                                      range(-(-large // 2)))]
     if kept:  # a full shard is not touched
         assert (grown / "shard-00000.h5").stat().st_mtime_ns == before["shard-00000.h5"]
@@ -85,7 +85,7 @@ def test_a_grow_killed_midway_finishes_to_the_same_bytes(tmp_path: Path, episode
     make_dataset(grown, episodes=1)
     _grow_killed(grown, episode)
     assert not (grown / INDEX).exists() and list(grown.glob("*.partial"))
-    assert read_manifest(grown)["settings"]["episodes"] == 5
+    assert read_dataset_record(grown)["settings"]["episodes"] == 5
     with pytest.raises(Sc2DataError, match="holds 5 episodes \\(or is growing to them\\)"):
         make_dataset(grown, episodes=3)
     with pytest.raises(Sc2DataError, match="unfinished rollout"):

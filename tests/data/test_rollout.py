@@ -17,7 +17,7 @@ import sc2data
 from sc2data._pysc2 import actions
 from sc2data.cli import main
 from sc2data.data.audit import verify
-from sc2data.data.dataset import INDEX, MANIFEST
+from sc2data.data.dataset import DATASET_RECORD, INDEX
 from sc2data.data.rollout import RolloutConfig, episode_seeds, rollout
 from sc2data.ground.errors import Sc2DataError
 from sc2data.testing.synthetic import synthetic_env_factory
@@ -76,8 +76,8 @@ def test_other_settings_in_the_same_folder_are_refused(tmp_path: Path) -> None:
     assert sorted((p.name, p.stat().st_mtime_ns) for p in out.iterdir()) == before
 
 
-def test_a_run_killed_before_its_manifest_is_resumable(tmp_path: Path) -> None:
-    """A folder holding only our lock and a half-written manifest is ours, not foreign."""
+def test_a_run_killed_before_its_dataset_record_is_resumable(tmp_path: Path) -> None:
+    """A folder holding only our lock and a half-written dataset record is ours, not foreign."""
     out = tmp_path / "out"
     out.mkdir()
     (out / ".lock").write_bytes(b"")
@@ -150,7 +150,7 @@ def test_kill_9_then_rerun_equals_an_uninterrupted_run(tmp_path: Path) -> None:
     assert proc.poll() is None, proc.stderr.read().decode() if proc.stderr else ""
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
-    assert not (out / INDEX).exists() and (out / MANIFEST).exists()
+    assert not (out / INDEX).exists() and (out / DATASET_RECORD).exists()
     resumed = rollout(RolloutConfig(env="sim", agent="reduced-random", episodes=6,
                                     episodes_per_shard=1, max_steps=900, seed=11), out,
                       progress=False)  # the same settings, in this process, with one worker

@@ -419,13 +419,13 @@ def test_a_sequential_read_takes_the_shared_chunk_from_the_cache(
     assert counts[128 << 20] == [2 * blocks, blocks]
 
 
-def test_a_manifest_without_a_codec_is_refused(dataset: Path, tmp_path: Path) -> None:
+def test_a_dataset_record_without_a_codec_is_refused(dataset: Path, tmp_path: Path) -> None:
     import shutil
 
     copy = Path(shutil.copytree(dataset, tmp_path / "d"))
-    manifest = json.loads((copy / "dataset.json").read_text())
-    del manifest["settings"]["codec"]
-    (copy / "dataset.json").write_text(json.dumps(manifest))
+    record = json.loads((copy / "dataset.json").read_text())
+    del record["settings"]["codec"]
+    (copy / "dataset.json").write_text(json.dumps(record))
     with pytest.raises(Sc2DataError, match="dataset.json: no valid codec in its settings"):
         sc2data.open_dataset(copy)
 

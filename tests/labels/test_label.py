@@ -303,7 +303,7 @@ def test_cli_label_a_dataset(data: Path, capsys: pytest.CaptureFixture[str]) -> 
 def test_labels_after_a_grow_are_a_fresh_runs(data: Path, tmp_path: Path,
                                               capsys: pytest.CaptureFixture[str]) -> None:
     """Labelled, grown by an episode (its partial last shard rolled out again), labelled again:
-    the labels of a dataset rolled out at that size at once, fingerprint included."""
+    the labels of a dataset rolled out at that size at once, labels fingerprint included."""
     assert exit_code("label", str(data), "--no-progress") == 0
     assert exit_code("rollout", "--out", str(data), "--episodes", "4", "--no-progress") == 0
     assert exit_code("label", str(data), "--no-progress") == 0
@@ -434,14 +434,14 @@ def test_label_unit_reloads_for_a_new_run_in_a_long_lived_process(tmp_path: Path
             label_unit(str(data), (None, (), None), unit.key, str(part), keys, batch_size,
                        bar.update)
 
-    fingerprints = []
+    dataset_fingerprints: list[str] = []
     for seed in ("3", "4"):
         shutil.rmtree(data, ignore_errors=True)
         assert exit_code("rollout", "--out", str(data), "--episodes", "2", "--max-steps", "60",
                          "--seed", seed, "--no-progress") == 0
         assert label_dataset(data, progress=False, run_units=in_this_process).stacks == 120
-        fingerprints.append(read_meta(data)["dataset"]["fingerprint"])
-    assert fingerprints[0] != fingerprints[1]
+        dataset_fingerprints.append(read_meta(data)["dataset"]["fingerprint"])
+    assert dataset_fingerprints[0] != dataset_fingerprints[1]
 
 
 def _flip(path: Path, at: int) -> None:

@@ -16,7 +16,7 @@ pytest.importorskip("torch")
 import sc2data.pairs.loader as loader_mod  # noqa: E402
 from sc2data.ground.errors import Sc2DataError  # noqa: E402
 from sc2data.model.evaluate import evaluate  # noqa: E402
-from sc2data.pairs.layout import fingerprint
+from sc2data.pairs.layout import pairset_fingerprint
 from sc2data.pairs.loader import PairLoader, PairSet  # noqa: E402
 from tests.cli import assert_one_line_error, run_cli
 from tests.mem_helpers import tiny_pairset, train_tiny  # noqa: E402
@@ -81,7 +81,7 @@ def test_a_tiny_run_lowers_the_loss_and_beats_chance(data: Path, tmp_path: Path)
     assert report["splits"]["val"]["roc_auc"] > 0.7
 
 
-def test_run_folder_records_config_fingerprint_curves_and_checkpoint(data: Path,
+def test_run_folder_records_config_pairset_fingerprint_curves_and_checkpoint(data: Path,
                                                                      tmp_path: Path) -> None:
     run = train_tiny(data, tmp_path / "run", epochs=2)
     config = json.loads((run / "config.json").read_text())
@@ -157,7 +157,7 @@ def _broken(data: Path, tmp_path: Path, what: str) -> Path:
                          pa.array(["qqzx vvkw"] * t.num_rows))
         pq.write_table(t, bad / "pairs.parquet")
         meta = json.loads((bad / "pairset.json").read_text())  # a consistent pair set
-        meta["fingerprint"] = fingerprint(bad)
+        meta["fingerprint"] = pairset_fingerprint(bad)
         (bad / "pairset.json").write_text(json.dumps(meta))
     elif what == "flipped":
         with open(bad / "packed" / "train.h5", "r+b") as f:  # one byte, late in the file

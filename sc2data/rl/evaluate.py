@@ -67,7 +67,8 @@ EVAL_SHAPE: Shape = {"episodes": int, "seeds": [int], "sides": [str], "sampled":
                      "actions?": {"*": {"*": float}}}
 """``eval.json``, as :func:`read_eval` checks it."""
 BASELINES_SHAPE: Shape = {"episodes": int, "seeds": [int], "episode_steps": (int, type(None)),
-                          "protocol": int, "agents": {"*": {"space": str, **SCORES_SHAPE}}}
+                          "protocol": int, "agents": {"*": {"space": str, **SCORES_SHAPE,
+                                                            "actions?": {"*": float}}}}
 """``baselines.json``, as :func:`read_baselines` checks it."""
 
 REFERENCE_AGENTS: dict[str, str] = {
@@ -304,7 +305,8 @@ def baselines(out: Path, episodes: int = 10, episode_steps: int | None = None,
               agents: Sequence[str] = tuple(REFERENCE_AGENTS),
               progress: bool | None = None) -> dict[str, Any]:
     """Play the reference agents on the evaluation episodes (simulator); writes and returns
-    ``OUT/baselines.json``: per agent its action space and :func:`scores`."""
+    ``OUT/baselines.json``: per agent its action space and :func:`scores`, and for the uniform
+    policies the share of each function (or macro) they chose, as ``eval.json``'s ``actions``."""
     require_rl("sc2data rl baselines")
     unknown = [a for a in agents if a not in REFERENCE_AGENTS]
     if unknown:
@@ -327,15 +329,18 @@ def baselines(out: Path, episodes: int = 10, episode_steps: int | None = None,
                 env = BuildMarinesGym(space, obs="compact",
                                       game_loops=episode_steps * STEP_MUL if episode_steps
                                       else None)
+                chosen: Counter[str] = Counter()
                 try:
                     nvec = getattr(env.action_space, "nvec", [getattr(env.action_space, "n", 0)])
                     marines = _episodes(UniformPolicy(nvec), env, seeds, False,
-                                        lambda: b.update(1))
+                                        lambda: b.update(1), chosen)
                 finally:
                     env.close()
+                record["agents"][name] = {"space": space, **scores(marines),
+                                          "actions": action_shares(chosen)}
             else:
                 marines = _agent_episodes(name, seeds, episode_steps, lambda: b.update(1))
-            record["agents"][name] = {"space": space, **scores(marines)}
+                record["agents"][name] = {"space": space, **scores(marines)}
     with writing(str(out / "baselines.json"), "free some space, then rerun the same command"):
         out.mkdir(parents=True, exist_ok=True)
         _write_json(out / "baselines.json", record)

@@ -11,7 +11,14 @@ import pytest
 
 from sc2data.ground.errors import Sc2DataError
 from sc2data.rl.envs import PAPER_FUNCTIONS, BuildMarinesGym
-from sc2data.rl.evaluate import REFERENCE_AGENTS, UniformPolicy, eval_seeds, game_seed, side_of
+from sc2data.rl.evaluate import (
+    REFERENCE_AGENTS,
+    UniformPolicy,
+    eval_seeds,
+    game_seed,
+    read_baselines,
+    side_of,
+)
 from sc2data.rl.train import EVAL_SEED
 from tests.cli import assert_one_line_error, run_cli
 
@@ -72,6 +79,11 @@ def test_baselines_play_every_reference_agent_on_the_evaluation_episodes(
     for name, agent in record["agents"].items():
         assert agent["space"] == REFERENCE_AGENTS[name] and len(agent["marines"]) == 2
         assert name in text
+        # the uniform policies say what they chose (30 steps: 2 × 30 paper decisions)
+        assert ("actions" in agent) == name.startswith("uniform-")
+    paper = record["agents"]["uniform-paper"]["actions"]
+    assert set(paper) <= set(PAPER_FUNCTIONS) and abs(sum(paper.values()) - 1) < 1e-3
+    assert read_baselines(out)["agents"]["uniform-paper"]["actions"] == paper
     code, _, _ = run_cli(args, capsys)  # seeded: the same figures again
     assert json.loads((out / "baselines.json").read_text()) == record
     code, _, err = run_cli(["rl", "baselines", "--out", out, "--episodes", "0"], capsys)

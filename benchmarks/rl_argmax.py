@@ -1,5 +1,5 @@
-"""Why argmax play makes no marine: each run's most likely action over the first decisions of an
-evaluation episode, and the function head's probabilities at the episode's first state.
+"""Why argmax play makes no marine: each paper-space run's most likely action over the first
+decisions of an evaluation episode, and the function head's probabilities at its first state.
 
 ``sc2data rl evaluate`` records the functions each mode chose (``eval.json``'s ``actions``); this
 script adds the head's probabilities, which say how near to uniform the mode is.
@@ -27,6 +27,9 @@ def argmax_play(run: Path, decisions: int) -> dict[str, object]:
     """The functions argmax play chooses over ``decisions`` decisions of the first evaluation
     episode, and the top three function probabilities at its first state."""
     cfg = load_config(run)
+    if cfg.action_space != "paper":
+        raise SystemExit(f"{run} plays the {cfg.action_space} space; this script reads the paper "
+                         "space's function head (rl evaluate's actions cover both)")
     env = BuildMarinesGym(cfg.action_space, backend=cfg.backend, obs=cfg.obs_config(),
                           game_loops=game_loops(cfg))
     try:

@@ -79,7 +79,7 @@ def test_baselines_play_every_reference_agent_on_the_evaluation_episodes(
     for name, agent in record["agents"].items():
         assert agent["space"] == REFERENCE_AGENTS[name] and len(agent["marines"]) == 2
         assert name in text
-        # the uniform policies say what they chose (30 steps: 2 × 30 paper decisions)
+        # the uniform policies say what they chose, read against a trained policy's
         assert ("actions" in agent) == name.startswith("uniform-")
     paper = record["agents"]["uniform-paper"]["actions"]
     assert set(paper) <= set(PAPER_FUNCTIONS) and abs(sum(paper.values()) - 1) < 1e-3

@@ -28,8 +28,10 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-RECIPE = """
-name = "killed"
+def _recipe(name: str, *, states: int, nulls: int, sources: str = "") -> str:
+    """A small recipe of two commands (``sources``: TOML tables of a mixed recipe)."""
+    return f"""
+name = "{name}"
 seed = 3
 
 [rollout]
@@ -37,7 +39,7 @@ env = "sim"
 agent = "reduced-random"
 episodes = 3
 layers = "paper"
-
+{sources}
 [commands.build_scv]
 text = "build an SCV"
 
@@ -45,8 +47,8 @@ text = "build an SCV"
 text = "collect minerals"
 
 [pairs]
-states_per_command = 30
-null_states = 60
+states_per_command = {states}
+null_states = {nulls}
 
 [split]
 method = "random"
@@ -54,6 +56,9 @@ train = 0.6
 val = 0.2
 test = 0.2
 """
+
+
+RECIPE = _recipe("killed", states=30, nulls=60)
 TRAIN = ["--epochs", "2", "--vocab-size", "2000", "--threads", "1", "--batch-size", "16"]
 SIGNALS = (signal.SIGKILL, signal.SIGINT)
 """What stops a run: ``kill -9`` or Ctrl-C, drawn with the moment."""
@@ -265,39 +270,14 @@ def test_export_stopped_anywhere_finishes_to_the_same_export(
 
 POLICY_RUN = ["rl", "train", "--steps", "64", "--rollout", "32", "--batch-size", "32",
               "--episode-steps", "25", "--envs", "1"]
-MIXED = """
-name = "killed-mixed"
-seed = 3
-
-[rollout]
-env = "sim"
-agent = "reduced-random"
-episodes = 3
-layers = "paper"
-
+MIXED = _recipe("killed-mixed", states=8, nulls=20, sources="""
 [sources.random]
 share = 0.5
 
 [sources.policy]
 share = 0.5
 agent = AGENT
-
-[commands.build_scv]
-text = "build an SCV"
-
-[commands.collect_minerals]
-text = "collect minerals"
-
-[pairs]
-states_per_command = 8
-null_states = 20
-
-[split]
-method = "random"
-train = 0.6
-val = 0.2
-test = 0.2
-"""
+""")
 
 
 def _policy_rollout(run: Path, out: Path) -> list[str]:

@@ -63,6 +63,8 @@ SUBSTITUTIONS: list[tuple[str, str]] = [
                             "--no-progress\n"),
     ("--out loop/mem-1\n", "--out loop/mem-1 --epochs 1 --threads 1 --vocab-size 2000 "
                             "--no-progress\n"),
+    ("--epochs 3 --out loop/mem-1-tuned", "--epochs 1 --out loop/mem-1-tuned --threads 1 "
+                                          "--vocab-size 2000 --no-progress"),
     ("--steps 65536", "--steps 64 --rollout 32 --batch-size 32 --episode-steps 40 "
                       "--checkpoint-every 64 --no-progress"),
     ("--steps 131072", "--steps 128 --rollout 32 --batch-size 32 --episode-steps 40 "

@@ -421,7 +421,8 @@ def verify(folder: Path = typer.Argument(..., metavar="FOLDER", help=_FOLDER_HEL
 @app.command("train")
 @with_options(config_options(TrainConfig, arguments={
     "data": ("PAIRS", "Pair-set folder (sc2data pair --out, or a build's OUT/pairs).")},
-    flags={"progress": "--progress/--no-progress"}, metavars={"out": "PATH", "vectors": "PATH"}))
+    flags={"progress": "--progress/--no-progress"},
+    metavars={"out": "PATH", "vectors": "PATH", "init": "RUN"}))
 def train_cmd(config: Optional[TrainConfig] = None) -> None:
     """Train the mutual-embedding model; keep the checkpoint of minimum validation loss."""
     assert config is not None

@@ -20,6 +20,11 @@ text encoder's source and digest, versions), ``metrics.jsonl`` (one line per epo
 (epochs done, finished or not, and every run file's sha256, so a damaged file is caught where it is
 read). One run at a time per folder; an interrupted run resumes from its last finished epoch when
 the same command is run again, to the result an uninterrupted run gives.
+
+``--init RUN`` starts from another finished run's best weights instead of fresh ones
+(fine-tuning, as the MEM loop does): the same layers, model settings and text encoder are
+required, the categorical value tables are that run's (the same one-hot channels), Adam starts
+afresh, and ``config.json`` records the checkpoint's sha256.
 """
 
 from __future__ import annotations
@@ -49,7 +54,7 @@ from sc2data.ground.files import (
     writer,
     writing,
 )
-from sc2data.ground.formats import Shape
+from sc2data.ground.formats import CHECKPOINT, Shape
 from sc2data.ground.progress import bar as progress_bar
 from sc2data.ground.provenance import versions
 from sc2data.ground.resume import differences, read_record, refusal
@@ -98,6 +103,10 @@ class TrainConfig:
     """Spatial layers enter as p×p cell shares (1 = full resolution; see sc2data.model.mem)."""
     conv_channels: int = 16
     """Channels of each tower's first convolution (the paper's 16)."""
+    init: str | None = None
+    """A finished run whose best checkpoint this run starts from (fine-tuning, as the MEM loop
+    does); it must read the same layers with the same model settings and text encoder. None =
+    fresh weights."""
     window: int = 4
     """Packed blocks (256 stacks each) decoded and shuffled together by the loader (≈ 180 MB of
     decoded stacks per block-window of the paper's 20 layers)."""
@@ -151,6 +160,7 @@ def train(cfg: TrainConfig) -> Path:
         raise Sc2DataError(f"{data.path} has no training pairs; rebuild it with more states")
     texts = _Texts.encode(cfg, data, splits)
     text_t = M.text_tensors(texts.inputs, device)
+    start = _init_checkpoint(cfg, data, texts) if cfg.init else None  # before any folder is made
     train_split, val_split = data.packed("train"), data.packed("val")
     run = _make_run_folder(Path(cfg.out or Path("runs") / cfg.name))
     with FolderLock(run, "train"), writing(f"the run {run}", "free some space, then rerun the "
@@ -164,10 +174,12 @@ def train(cfg: TrainConfig) -> Path:
                 tqdm.write(f"{run} is a finished run of these settings; nothing to do")
             return run
         trainer = _Trainer.build(cfg, data, texts, device=device, text_t=text_t,
-                                 train_split=train_split)
+                                 train_split=train_split, start=start)
         loaders = (trainer.loader(splits["train"], train_split, shuffle=True),
                    trainer.loader(splits["val"], val_split, shuffle=False))
         config = _run_config(cfg, trainer, data, texts=texts, run=run)
+        if start is not None:
+            config["init_sha256"] = start["sha256"]
         if resumed is None:
             write_atomic(run / CONFIG, json.dumps(config, indent=2).encode())
         config = json.loads(json.dumps(config))  # plain types only: best.pt loads with weights_only
@@ -246,20 +258,25 @@ class _Trainer:
 
     @classmethod
     def build(cls, cfg: TrainConfig, data: PairSet, texts: _Texts, *, device: Any, text_t: Any,
-              train_split: Any) -> _Trainer:
-        """The model (input channels and categorical tables from the data's schema) and Adam."""
+              train_split: Any, start: dict[str, Any] | None = None) -> _Trainer:
+        """The model (input channels and categorical tables from the data's schema, or the
+        weights and tables of ``start``, an ``--init`` checkpoint) and Adam."""
         import torch
 
         from sc2data.model import mem as M
 
-        mcfg = M.ModelConfig(categorical=cfg.categorical, pool=cfg.pool,  # type: ignore[arg-type]
-                             conv=M.conv_for(cfg.pool, cfg.conv_channels),
-                             text_encoder=cfg.text_encoder)  # type: ignore[arg-type]
-        big = [l.key for l in data.schema.layers if l.categorical and l.scale > mcfg.max_table]
-        tables = M.value_tables(data.schema, (b for _, b in train_split.blocks(keys=big)) if big
-                                else [], mcfg.max_table)
+        mcfg = _model_config(cfg)
+        if start is not None:  # the tables the weights were trained on: the same channels
+            tables = start["tables"]
+        else:
+            big = [l.key for l in data.schema.layers if l.categorical and l.scale > mcfg.max_table]
+            tables = M.value_tables(data.schema, (b for _, b in train_split.blocks(keys=big))
+                                    if big else [], mcfg.max_table)
         model = M.MEM(data.schema, tables, texts.words.vectors if texts.words else None, mcfg,
                       text_dim=texts.dim).to(device)
+        if start is not None:  # every trained weight; the frozen word table is this run's own
+            weights = {k: v for k, v in start["state_dict"].items() if k != _WORD_TABLE}
+            model.load_state_dict(weights, strict=False)
         optimizer = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=cfg.lr)
         return cls(cfg, model, mcfg, optimizer, device, text_t,
                    {t: i for i, t in enumerate(texts.texts)})
@@ -355,6 +372,52 @@ class _Trainer:
         with torch.no_grad():
             l2 = float(self.model.l2())
         return vsums, val_seconds, l2
+
+
+_WORD_TABLE = "command.words.weight"
+"""The LSTM encoder's frozen word vectors: rebuilt from the vectors by every run, by its own
+vocabulary (a pair set with other texts keeps other words), so never carried by ``--init``."""
+
+
+def _model_config(cfg: TrainConfig) -> Any:
+    from sc2data.model import mem as M
+
+    return M.ModelConfig(categorical=cfg.categorical, pool=cfg.pool,  # type: ignore[arg-type]
+                         conv=M.conv_for(cfg.pool, cfg.conv_channels),
+                         text_encoder=cfg.text_encoder)  # type: ignore[arg-type]
+
+
+def _init_checkpoint(cfg: TrainConfig, data: PairSet, texts: _Texts) -> dict[str, Any]:
+    """The ``--init`` run's best checkpoint, checked to fit this run: finished and intact, the
+    same layers, model settings and text encoder; else one line saying what differs."""
+    import torch
+
+    run = Path(str(cfg.init))
+    if not run.is_dir():
+        raise Sc2DataError(f"--init {run}: no such run folder; name a finished sc2data train run")
+    check_run(run)
+    path = run / BEST
+    try:
+        blob: dict[str, Any] = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as e:
+        raise Sc2DataError(f"{path} is not a readable checkpoint ({type(e).__name__}); train "
+                           f"the run again") from None
+    CHECKPOINT.check(blob, path)
+    if blob["schema"] != data.schema.to_dict():
+        raise Sc2DataError(f"--init {run}: its model reads other layers than {data.path}; "
+                           f"fine-tune only on pairs of the same layers")
+    want = json.loads(json.dumps(asdict(_model_config(cfg))))
+    have = json.loads(json.dumps(blob["model_config"]))
+    diff = sorted(k for k in want if have.get(k) != want[k])
+    if diff:
+        raise Sc2DataError(f"--init {run}: its model settings differ ({', '.join(diff)}); "
+                           f"train with that run's --categorical, --pool, --conv-channels and "
+                           f"--text-encoder")
+    if blob.get("vectors_source") != texts.source:
+        raise Sc2DataError(f"--init {run}: its text encoder read {blob.get('vectors_source')}, "
+                           f"this run {texts.source}; pass the same --vectors")
+    blob["sha256"] = sha256_file(path)
+    return blob
 
 
 def _run_config(cfg: TrainConfig, trainer: _Trainer, data: PairSet, *, texts: _Texts,

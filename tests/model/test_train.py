@@ -339,3 +339,54 @@ def test_info_on_a_run(data: Path, tmp_path: Path, capsys: pytest.CaptureFixture
     code, out, err = run_cli(["info", str(run)], capsys)
     assert code == 0, err
     assert "2 of 2 epochs" in out and "val loss" in out and "eval      train" in out
+
+
+def test_init_starts_from_the_runs_weights_and_records_them(data: Path, tmp_path: Path) -> None:
+    """--init: the first epoch begins where the named run ended (a near-zero step keeps its
+    validation loss and weights), config.json names its checkpoint; fresh weights do not."""
+    import hashlib
+
+    import torch
+
+    a = train_tiny(data, tmp_path / "a", epochs=3, lr=2e-3)
+    best_a = min(r["val_loss"] for r in map(json.loads, (a / "metrics.jsonl").open()))
+    tuned = train_tiny(data, tmp_path / "tuned", epochs=1, lr=1e-9, l2=0.0, init=str(a))
+    fresh = train_tiny(data, tmp_path / "fresh", epochs=1, lr=1e-9, l2=0.0)
+    loss = {r: json.loads((r / "metrics.jsonl").read_text())["val_loss"] for r in (tuned, fresh)}
+    assert loss[tuned] == pytest.approx(best_a, rel=1e-3)
+    assert loss[fresh] > 1.5 * best_a
+    wa, wt = (torch.load(r / "best.pt", weights_only=True)["state_dict"] for r in (a, tuned))
+    assert wa.keys() == wt.keys()
+    for k in wa:
+        torch.testing.assert_close(wt[k], wa[k], atol=1e-5, rtol=0)
+    config = json.loads((tuned / "config.json").read_text())
+    assert config["init"] == str(a)
+    assert config["init_sha256"] == hashlib.sha256((a / "best.pt").read_bytes()).hexdigest()
+
+
+@pytest.mark.parametrize("what, needles", [
+    ("missing", ["--init", "no such run folder"]),
+    ("pool", ["--init", "model settings differ", "pool"]),
+    ("unfinished", ["unfinished run", "1 of 2 epochs"]),
+    ("damaged", ["best.pt", "damaged or was replaced"]),
+])
+def test_cli_init_that_does_not_fit_is_a_one_line_error(what: str, needles: list[str],
+                                                        data: Path, tmp_path: Path,
+                                                        capsys: pytest.CaptureFixture[str]
+                                                        ) -> None:
+    from sc2data.model.train import _write_state
+
+    base = tmp_path / "base"
+    if what != "missing":
+        train_tiny(data, base, epochs=1)
+    if what == "unfinished":
+        _write_state(base, 1, 2)
+    if what == "damaged":
+        with open(base / "best.pt", "r+b") as f:
+            f.seek(200)
+            f.write(b"\0" * 16)
+    code, _, err = run_cli(["train", str(data), "--out", str(tmp_path / "run"), "--epochs", "1",
+                            "--vocab-size", "2000", "--no-progress", "--init", str(base),
+                            *(["--pool", "1"] if what == "pool" else [])], capsys)
+    assert_one_line_error(code, err, *needles)
+    assert not (tmp_path / "run").exists()

@@ -11,8 +11,10 @@ both judges of each command of the MEM's pair set:
 Per command, with the rule as ground truth: ``precision = TP / (TP + FP)`` (of the stacks the
 MEM matched, the share the rule also fired on: how often a narration bonus is deserved),
 ``recall = TP / (TP + FN)`` (of the stacks the rule fired on, the share the MEM matched: how
-often a deserved bonus is paid) and their harmonic mean F1. Stacks on which no rule fires are
-"null" stacks; the share of them the MEM matches to no command is reported too.
+often a deserved bonus is paid) and their harmonic mean F1, and what its false matches were
+(:func:`false_matches`: the stacks where another command's rule fired, or none did — the
+confusions a round of the MEM loop must fix). Stacks on which no rule fires are "null" stacks;
+the share of them the MEM matches to no command is reported too.
 
 The two rewards, judged as the field judges a learnt reward (Gleave et al. 2021, *Quantifying
 differences in reward functions*): a stack's **rules reward** is the number of rules that fire
@@ -264,18 +266,35 @@ def _sample(seen: _Seen, rule_frames: list[Any], mem_frames: list[Any], steps: n
     seen.support += [index[u] for u in us.tolist()]
 
 
+def false_matches(fired: np.ndarray, matched: np.ndarray, ids: list[str]
+                  ) -> dict[str, dict[str, int]]:
+    """Per command, what its false matches were: for each other command, the stacks the MEM
+    matched to this one where that command's rule fired (a stack may count under several), and
+    ``null`` for those where no rule fired — the confusions a MEM loop's pairs must fix."""
+    none = ~fired.any(1)
+    out: dict[str, dict[str, int]] = {}
+    for k, cid in enumerate(ids):
+        false = matched[:, k] & ~fired[:, k]
+        counts = {other: int((false & fired[:, j]).sum()) for j, other in enumerate(ids)
+                  if j != k}
+        counts["null"] = int((false & none).sum())
+        out[cid] = {c: n for c, n in counts.items() if n}
+    return out
+
+
 def _result(judge: _Judge, fired: np.ndarray, matched: np.ndarray, *, epic: float | None,
             seen: _Seen, cfg: Any, head: dict[str, Any]) -> dict[str, Any]:
     """``agreement.json``: ``head``, then per command and over all stacks."""
     tp, fp, fn = ((fired & matched).sum(0), (~fired & matched).sum(0),
                   (fired & ~matched).sum(0))
     none = ~fired.any(1)
+    confused = false_matches(fired, matched, judge.ids)
     per = {i: {"text": t, "rule_fired": int(fired[:, k].sum()),
                "mem_matched": int(tp[k] + fp[k]), "tp": int(tp[k]), "fp": int(fp[k]),
                "fn": int(fn[k]), "precision": _ratio(int(tp[k]), int(tp[k] + fp[k])),
                "recall": _ratio(int(tp[k]), int(tp[k] + fn[k])),
                "f1": _f1(int(tp[k]), int(fp[k]), int(fn[k])),
-               "pearson": pearson(fired[:, k], matched[:, k])}
+               "pearson": pearson(fired[:, k], matched[:, k]), "false_matches": confused[i]}
            for k, (i, t) in enumerate(zip(judge.ids, judge.texts))}
     return {**head, "stacks": int(len(fired)),
             "marines": seen.marines, "commands": per, "null_stacks": int(none.sum()),
@@ -302,6 +321,11 @@ def summary(result: dict[str, Any]) -> list[str]:
     for cid, c in result["commands"].items():
         lines.append(f"{cid:<20} {c['rule_fired']:>10,} {c['mem_matched']:>11,} "
                      f"{pct(c['precision']):>9} {pct(c['recall']):>7} {pct(c.get('f1')):>7}")
+    for cid, c in result["commands"].items():
+        if c.get("false_matches"):
+            lines.append(f"{cid} matched where instead: " + ", ".join(
+                f"{other} fired {n:,}" if other != "null" else f"no rule fired {n:,}"
+                for other, n in c["false_matches"].items()))
     lines.append(f"null stacks (no rule fires): {result['null_stacks']:,}, matched to no "
                  f"command by the MEM: {pct(result['null_unmatched'])}")
     r = result.get("reward")

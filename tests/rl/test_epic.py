@@ -89,3 +89,20 @@ def test_agreement_reports_f1_and_the_rewards_correlation_and_epic(
     assert reward["epic_support"] == 32 and reward["gamma"] == 0.99
     assert reward["epic"] is None or 0.0 <= reward["epic"] <= 1.0
     assert reward["pearson"] is None or -1.0 <= reward["pearson"] <= 1.0
+    for c in result["commands"].values():  # every false match is accounted for
+        assert sum(c["false_matches"].values()) >= c["fp"]
+
+
+def test_false_matches_by_hand() -> None:
+    """Stacks: depot fired (matched depot and barracks), barracks fired (matched depot), null
+    (matched barracks), both fired (matched all three)."""
+    from sc2data.rl.agreement import false_matches
+
+    ids = ["depot", "barracks", "marine"]
+    fired = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 0], [1, 1, 0]], bool)
+    matched = np.array([[1, 1, 0], [1, 0, 0], [0, 1, 0], [1, 1, 1]], bool)
+    assert false_matches(fired, matched, ids) == {
+        "depot": {"barracks": 1},
+        "barracks": {"depot": 1, "null": 1},
+        "marine": {"depot": 1, "barracks": 1},
+    }

@@ -61,7 +61,20 @@ def test_parse_reads_every_field() -> None:
     ("rollout.layers", "most", "[rollout].layers must be one of paper, full"),
     ("pairs.states_per_command", -5, "[pairs].states_per_command must be a positive integer"),
     ("pairs.null_states", -1, "[pairs].null_states must be a non-negative integer"),
-    ("pairs.mismatch", "nearest", "[pairs].mismatch must be one of uniform"),
+    ("pairs.mismatch", "nearest", "[pairs].mismatch must be one of uniform, confusable"),
+    ("pairs.confusable", {"build_scv": ["train_marine"]},
+     "[pairs.confusable] and confusable_share apply only with mismatch = \"confusable\""),
+    ("pairs", {"states_per_command": 10, "null_states": 5, "mismatch": "confusable"},
+     "mismatch = \"confusable\" needs a [pairs.confusable] table"),
+    ("pairs", {"states_per_command": 10, "null_states": 5, "mismatch": "confusable",
+               "confusable": {"build_depot": ["build_scv"]}},
+     "[pairs.confusable]: 'build_depot' is not a command of this recipe"),
+    ("pairs", {"states_per_command": 10, "null_states": 5, "mismatch": "confusable",
+               "confusable": {"build_scv": ["build_scv"]}},
+     "[pairs.confusable].build_scv must be a non-empty list of the recipe's other command ids"),
+    ("pairs", {"states_per_command": 10, "null_states": 5, "mismatch": "confusable",
+               "confusable": {"build_scv": ["train_marine"]}, "confusable_share": 1.5},
+     "[pairs].confusable_share must be a number in (0, 1]"),
     ("pairs.states_per_command", ..., "missing required key 'states_per_command'"),
     ("split.train", 0.9, "must be positive and sum to 1"),
     ("split.method", "stratified", "[split].method must be one of episode, random"),
@@ -129,3 +142,12 @@ def test_load_reports_bad_toml_and_missing_file(tmp_path: Path) -> None:
         load(bad)
     with pytest.raises(RecipeError, match="cannot read recipe"):
         load(tmp_path / "absent.toml")
+
+
+def test_confusable_is_recorded_only_where_used() -> None:
+    assert "confusable" not in json.loads(json.dumps(parse(BASE).to_dict()))["pairs"]
+    d = with_("pairs", {"states_per_command": 10, "null_states": 5, "mismatch": "confusable",
+                        "confusable": {"build_scv": ["train_marine"]}})
+    pairs = json.loads(json.dumps(parse(d).to_dict()))["pairs"]
+    assert pairs["confusable"] == {"build_scv": ["train_marine"]}
+    assert pairs["confusable_share"] == 0.5

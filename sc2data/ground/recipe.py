@@ -22,6 +22,12 @@ wrong type or an impossible count is an error that names the field. Example (the
     null_states = 50000                # states no rule fires on, each paired as a mismatch
     mismatch = "uniform"               # mismatched command: uniform over those not satisfied
 
+    # mismatch = "confusable": a share of each listed command's mismatched pairs name one of the
+    # commands its states are mistaken for (hard negatives; `sc2data rl agreement` shows them)
+    # confusable_share = 0.5
+    # [pairs.confusable]
+    # build_supply_depot = ["build_barracks"]
+
     [split]
     method = "episode"                 # episode-disjoint; "random" reproduces the paper
     train = 0.6667
@@ -125,6 +131,10 @@ class PairSpec:
     states_per_command: int
     null_states: int
     mismatch: str = "uniform"
+    confusable: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    """``mismatch = "confusable"``: per command id, the commands its states are mistaken for."""
+    confusable_share: float = 0.5
+    """The share of such a command's mismatched pairs drawn among its confusable commands."""
 
 
 @dataclass(frozen=True)
@@ -169,6 +179,10 @@ class Recipe:
                 del c["train_paraphrases"]
         if not self.sources:  # likewise
             del d["sources"]
+        if self.pairs.mismatch != "confusable":  # likewise
+            del d["pairs"]["confusable"], d["pairs"]["confusable_share"]
+        else:
+            d["pairs"]["confusable"] = {k: list(v) for k, v in self.pairs.confusable.items()}
         return d
 
 
@@ -260,10 +274,14 @@ def parse(data: Mapping[str, Any], source: str = "<recipe>") -> Recipe:
                                 tuple(lists["train_paraphrases"])))
     _check_phrases(w, commands)
 
-    p = data["pairs"]
+    p = dict(data["pairs"])
     _check_keys(f"{w} [pairs]", p, {"states_per_command": int, "null_states": int,
-                                    "mismatch": str},
+                                    "mismatch": str, "confusable": dict,
+                                    "confusable_share": (int, float)},
                 required=("states_per_command", "null_states"))
+    p["confusable"] = _confusable(w, p, commands)
+    if "confusable_share" in p:
+        p["confusable_share"] = float(p["confusable_share"])
     pairs = PairSpec(**p)
     _positive(f"{w} [pairs].states_per_command", pairs.states_per_command)
     _positive(f"{w} [pairs].null_states", pairs.null_states, allow_zero=True)
@@ -292,6 +310,40 @@ def parse(data: Mapping[str, Any], source: str = "<recipe>") -> Recipe:
     return Recipe(name=data["name"], seed=data["seed"], rollout=rollout, commands=tuple(commands),
                   pairs=pairs, split=split, description=data.get("description", ""),
                   source=source, sources=sources)
+
+
+def _confusable(w: str, p: Mapping[str, Any], commands: Sequence[Command]
+                ) -> dict[str, tuple[str, ...]]:
+    """``[pairs.confusable]`` checked: only with ``mismatch = "confusable"`` (which needs it),
+    every key and listed id a command of the recipe and not the key itself; the share in
+    (0, 1]."""
+    table, method = p.get("confusable", {}), p.get("mismatch", "uniform")
+    where = f"{w} [pairs.confusable]"
+    if method != "confusable":
+        if table or "confusable_share" in p:
+            raise RecipeError(f"{where} and confusable_share apply only with mismatch = "
+                              f"\"confusable\"; set it, or drop them")
+        return {}
+    if not table:
+        raise RecipeError(f"{w} [pairs]: mismatch = \"confusable\" needs a [pairs.confusable] "
+                          f"table (command id = [ids it is mistaken for])")
+    ids = [c.id for c in commands]
+    out: dict[str, tuple[str, ...]] = {}
+    for key, others in table.items():
+        if key not in ids:
+            raise RecipeError(f"{where}: {key!r} is not a command of this recipe (its commands: "
+                              f"{', '.join(ids)})")
+        if not (isinstance(others, list) and others and all(o in ids and o != key
+                                                            for o in others)):
+            raise RecipeError(f"{where}.{key} must be a non-empty list of the recipe's other "
+                              f"command ids ({', '.join(i for i in ids if i != key)}); got "
+                              f"{others!r}")
+        out[key] = tuple(others)
+    share = p.get("confusable_share", 0.5)
+    if isinstance(share, bool) or not (math.isfinite(share) and 0 < share <= 1):
+        raise RecipeError(f"{w} [pairs].confusable_share must be a number in (0, 1]; got "
+                          f"{share!r}")
+    return out
 
 
 _ROLLOUT_KEYS: dict[str, type] = {"env": str, "agent": str, "episodes": int, "layers": str,

@@ -33,5 +33,7 @@ SPLITS: tuple[str, ...] = ("train", "val", "test")
 SPLIT_METHODS: tuple[str, ...] = ("episode", "random")
 """How pairs are split: by episode (default, honest) or at random (the paper's)."""
 
-MISMATCH_METHODS: tuple[str, ...] = ("uniform",)
-"""How a mismatched command is drawn for a state."""
+MISMATCH_METHODS: tuple[str, ...] = ("uniform", "confusable")
+"""How a mismatched command is drawn for a state: uniformly among the commands not satisfied,
+or (``confusable``) a share of them among the commands a recipe lists as confused with the
+state's own (``[pairs.confusable]``)."""

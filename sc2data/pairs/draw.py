@@ -4,7 +4,9 @@ Kinds of pair (paper §3.3, "Dataset"):
 
 * **matched** — a state a command's rule fires on, with that command; target distance 0.
 * **mismatched** — the same state with another command, drawn uniformly among the commands whose
-  rules do *not* fire on it (so a mismatch is never secretly true); target 1.
+  rules do *not* fire on it (so a mismatch is never secretly true); target 1. With ``mismatch =
+  "confusable"`` a share of a listed command's mismatches are drawn among the commands its states
+  are mistaken for instead (hard negatives: :func:`confusable_mismatches`).
 * **null** — a state no command's rule fires on, with a command drawn uniformly; target 1.
 
 States are assigned to train/val/test either by episode (default: no episode on two sides, so
@@ -259,6 +261,9 @@ def _pair_table(recipe: Recipe, s: _Stacks, chosen: list[tuple[int, np.ndarray, 
     commands = recipe.commands
     ids = np.array([c.id for c in commands] + [""], dtype=object)  # ids[-1] = "" for null
     col = _pair_columns(s, chosen, ids, len(commands), rng)
+    if recipe.pairs.mismatch == "confusable":
+        col["cmd"] = confusable_mismatches(recipe, s.fires[col["idx"]], col["cmd"],
+                                           col["kind"] == "mismatched", col["label"])
     pool, idx, cmd = col["pool"], col["idx"], col["cmd"]
     if recipe.split.method == "random":
         pool = rng.permutation(np.repeat(np.arange(len(SPLITS)),
@@ -311,6 +316,27 @@ def _draw_mismatch(fires: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     # Uniform choice among allowed columns: rank random keys, take the best allowed one.
     keys = np.where(allowed, rng.random(allowed.shape), -1.0)
     return keys.argmax(axis=1)
+
+
+def confusable_mismatches(recipe: Recipe, fires: np.ndarray, cmd: np.ndarray,
+                          mismatched: np.ndarray, own: np.ndarray) -> np.ndarray:
+    """``mismatch = "confusable"``: each mismatched pair of a state of a listed command names,
+    with probability ``confusable_share``, one of the commands it is mistaken for (uniformly
+    among those whose rules do not fire on it; none left: the uniform draw stands). Drawn from
+    the seed's own stream, after the uniform draws, so nothing else of the pairs changes."""
+    ids = [c.id for c in recipe.commands]
+    hard = np.zeros((len(ids), len(ids)), bool)
+    for key, others in recipe.pairs.confusable.items():
+        hard[ids.index(key), [ids.index(o) for o in others]] = True
+    rows = np.flatnonzero(mismatched)
+    rng = np.random.default_rng(np.random.SeedSequence([recipe.seed, 0x5C2DA7A, 2]))
+    u, keys = rng.random(len(rows)), rng.random((len(rows), len(ids)))  # one draw each, in order
+    of = np.array([ids.index(i) for i in own[rows]], np.int64)
+    allowed = hard[of] & ~fires[rows]
+    use = (u < recipe.pairs.confusable_share) & allowed.any(axis=1)
+    out = cmd.copy()
+    out[rows[use]] = np.where(allowed, keys, -1.0).argmax(axis=1)[use]
+    return out
 
 
 def _available(recipe: Recipe, fires: np.ndarray, is_null: np.ndarray) -> dict[str, int]:

@@ -198,3 +198,50 @@ def test_training_phrasings_are_drawn_half_canonical_and_deterministically() -> 
     d["seed"] = 4
     other = build_pairs(parse(d), data).to_pydict()["command"]
     assert other != t["command"]
+
+
+# --- confusable mismatches (hard negatives)
+
+THREE = ["build_scv", "train_marine", "build_barracks"]
+
+
+def three(mismatch: dict[str, Any] | None = None) -> Any:
+    d = copy.deepcopy(BASE)
+    d["commands"]["build_barracks"] = {"text": "build a barracks"}
+    d["pairs"] = {"states_per_command": 60, "null_states": 5, **(mismatch or {})}
+    return parse(d)
+
+
+def labelled3() -> Labelled:
+    rng = np.random.default_rng(1)
+    ep = np.repeat(np.arange(12), 400)
+    st = np.tile(np.arange(400), 12).astype(np.int32)
+    return Labelled(ep, st, rng.random((len(ep), 3)) < np.array([0.06, 0.06, 0.06]))
+
+
+@pytest.mark.parametrize("share, low, high", [(1.0, 1.0, 1.0), (0.5, 0.62, 0.88)])
+def test_confusable_mismatches_name_the_listed_command_and_change_nothing_else(
+        share: float, low: float, high: float) -> None:
+    """A build_scv state's mismatches name train_marine with probability share (else uniformly
+    one of the two others: 0.5 + share / 2 in all, 0.75 at ½), unless train_marine fires on it;
+    every other column, and every other pair, is the uniform recipe's."""
+    data = labelled3()
+    key = {(int(e), int(s)): f for e, s, f in zip(data.episode, data.step, data.fires)}
+    plain = build_pairs(three(), data).to_pydict()
+    t = build_pairs(three({"mismatch": "confusable", "confusable_share": share,
+                           "confusable": {"build_scv": ["train_marine"]}}), data).to_pydict()
+    assert {k: v for k, v in t.items() if k not in ("command_id", "command")} == \
+        {k: v for k, v in plain.items() if k not in ("command_id", "command")}
+    named = []
+    for i, (kind, label) in enumerate(zip(t["kind"], t["label"])):
+        if kind != "mismatched" or label != "build_scv":
+            assert t["command_id"][i] == plain["command_id"][i]
+            continue
+        fires = key[(t["episode"][i], t["step"][i])]
+        assert not fires[THREE.index(t["command_id"][i])]  # never secretly true
+        if not fires[1]:
+            named.append(t["command_id"][i] == "train_marine")
+    assert len(named) > 30 and low <= np.mean(named) <= high
+    again = build_pairs(three({"mismatch": "confusable", "confusable_share": share,
+                               "confusable": {"build_scv": ["train_marine"]}}), data).to_pydict()
+    assert again == t  # deterministic

@@ -492,8 +492,17 @@ def load_checkpoint(path: str | os.PathLike[str], device: str | torch.device = "
         model = MEM(schema, blob["tables"], np.zeros((len(blob["words"]), dim), np.float32), cfg)
     else:
         model = MEM(schema, blob["tables"], None, cfg, text_dim=sd["command.mlp.0.weight"].shape[1])
-    model.load_state_dict(sd)
+    model.load_state_dict(flush_denormals(sd))
     return model.to(device).eval(), blob
+
+
+def flush_denormals(state: Mapping[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """``state`` with float32's denormal values set to zero. Training's weight penalty leaves
+    many weights there (12 % of a 20-epoch MEM's), where a CPU computes ~100× slower; their
+    contribution to a distance is below 1e-38, so nothing measurable changes."""
+    tiny = torch.finfo(torch.float32).tiny
+    return {k: v.masked_fill(v.abs() < tiny, 0.0) if v.is_floating_point() else v
+            for k, v in state.items()}
 
 
 def resolve_device(name: str) -> torch.device:
@@ -507,6 +516,6 @@ def resolve_device(name: str) -> torch.device:
     return torch.device(name)
 
 
-__all__ = ["MEM", "ModelConfig", "conv_for", "distance", "load_checkpoint", "save_checkpoint",
-           "model_inputs", "resolve_device", "text_tensors", "to_device", "to_tensors",
-           "value_tables"]
+__all__ = ["MEM", "ModelConfig", "conv_for", "distance", "flush_denormals", "load_checkpoint",
+           "model_inputs", "resolve_device", "save_checkpoint", "text_tensors", "to_device",
+           "to_tensors", "value_tables"]

@@ -15,6 +15,7 @@ from sc2data.ground.errors import Sc2DataError  # noqa: E402
 from sc2data.model.mem import (  # noqa: E402
     MEM,
     ModelConfig,
+    flush_denormals,
     load_checkpoint,
     save_checkpoint,
     to_tensors,
@@ -163,6 +164,32 @@ def test_checkpoint_reloads_to_identical_distances(tmp_path: Path) -> None:
     with torch.no_grad():
         np.testing.assert_array_equal(again(x, {"ids": ids, "lengths": torch.tensor([4, 1])},
                                             torch.zeros(6, dtype=torch.long)).numpy(), d0.numpy())
+
+
+def test_a_checkpoints_denormal_weights_load_as_zero_and_change_no_distance(
+        tmp_path: Path) -> None:
+    """Weights the penalty left below float32's smallest normal (slow on a CPU) load as 0."""
+    m, batch = _model(SMALL_SCHEMA, "onehot")
+    tiny = torch.finfo(torch.float32).tiny
+    with torch.no_grad():
+        w = m.state.head.weight
+        w[0, :8] = tiny / 4  # denormal
+        w[1, :8] = -tiny / 8
+    assert ((w.abs() < tiny) & (w != 0)).sum() == 16
+    save_checkpoint(tmp_path / "best.pt", m, WORDS, {"commands": []})
+    m.eval()
+    texts = ["build a supply depot", "depot"]
+    before = MEMScorer(m, {"words": WORDS}, torch.device("cpu")).distances(batch, texts)
+    loaded, _ = load_checkpoint(tmp_path / "best.pt")
+    for v in loaded.state_dict().values():
+        if v.is_floating_point():
+            assert not ((v.abs() < tiny) & (v != 0)).any()
+    assert float(loaded.state.head.weight[0, 0]) == 0.0
+    assert float(loaded.state.head.weight[2, 0]) == float(w[2, 0])  # normal values as they were
+    np.testing.assert_allclose(load_model(tmp_path / "best.pt").distances(batch, texts), before,
+                               rtol=1e-6)
+    ints = {"n": torch.tensor([1, 2])}
+    assert flush_denormals(ints)["n"].tolist() == [1, 2]  # integer tensors untouched
 
 
 def test_scorer_batches_broadcasts_and_refuses_bad_input(tmp_path: Path) -> None:

@@ -16,7 +16,7 @@ import typer
 from sc2data.cli.cliopts import config_options, with_options
 
 # sc2data.rl.train imports numpy only: the heavy packages load inside train() and require_rl().
-from sc2data.rl.train import RLConfig, require_rl, summary_line, train
+from sc2data.rl.train import RLConfig, require_rl, summary_line, train, trained_steps
 
 app = typer.Typer(help="Reinforcement learning on BuildMarines: sparse, rule-shaped or "
                        "narration-shaped rewards (MaskablePPO).",
@@ -32,9 +32,10 @@ def train_cmd(config: Optional[RLConfig] = None) -> None:
     """Train a MaskablePPO agent; writes checkpoints and the learning curve (curve.csv/json)."""
     assert config is not None
     require_rl("sc2data rl train")
+    before = trained_steps(Path(config.out))
     start = time.perf_counter()
     run = train(config)
-    typer.echo(summary_line(run, time.perf_counter() - start))
+    typer.echo(summary_line(run, time.perf_counter() - start, since=before))
 
 
 @app.command("evaluate")

@@ -60,6 +60,25 @@ def test_a_run_writes_logs_a_summary_and_a_checked_checkpoint(
     assert not list(run.glob("*.partial*"))
 
 
+def test_a_resumed_runs_speed_counts_only_the_decisions_it_trained(
+        trained: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import re
+
+    from sc2data.rl.train import summary_line, trained_steps
+
+    run = _copy(trained, tmp_path / "run")
+    before = trained_steps(run)
+    assert before > 0 and trained_steps(tmp_path / "none") == 0
+    assert "; 1 decisions/s" in summary_line(run, before / 2, since=before // 2)
+    assert "; 2 decisions/s" in summary_line(run, before / 2)
+    assert "decisions/s" not in summary_line(run, 1.0, since=before)  # nothing trained
+    code, out, err = run_cli(["rl", "train", "--out", run, *TINY, "--steps", str(before + 64)],
+                             capsys)
+    assert code == 0, err
+    rate = float(re.search(r"; ([\d,]+) decisions/s this session", out)[1].replace(",", ""))
+    assert rate < 5_000, out  # 64 decisions in a real session, not the run's total
+
+
 def test_two_trainings_into_one_folder_cannot_both_write(
         trained: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     run = _copy(trained, tmp_path / "run")

@@ -431,9 +431,6 @@ def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path
     # The learner and the games' workers take turns (a vector step, then the batched reward and
     # policy; PPO's update while the workers wait), so the learner may use every core.
     torch.set_num_threads(cfg.threads or cores())
-    # Adam's moments of weights no sample moves decay into float32's denormal range (a fifth of
-    # them after 1,000,000 paper decisions), where a CPU computes them several times slower.
-    torch.set_flush_denormal(True)
     device = resolve_device(cfg.device)
     formats = _log_formats(cfg)
     _write_json(run / runs.CONFIG, identity)

@@ -169,6 +169,7 @@ def test_checkpoint_reloads_to_identical_distances(tmp_path: Path) -> None:
 def test_a_checkpoints_denormal_weights_load_as_zero_and_change_no_distance(
         tmp_path: Path) -> None:
     """Weights the penalty left below float32's smallest normal (slow on a CPU) load as 0."""
+    torch.set_flush_denormal(False)  # as a fresh process is (training in this one sets it)
     m, batch = _model(SMALL_SCHEMA, "onehot")
     tiny = torch.finfo(torch.float32).tiny
     with torch.no_grad():

@@ -207,7 +207,8 @@ def _seed_and_device(cfg: TrainConfig) -> Any:
         torch.set_num_threads(cfg.threads or max(1, len(os.sched_getaffinity(0)) - 1))
         # The weight penalty drives unused weights (and Adam's moments) into float32's denormal
         # range, where a CPU computes ~100× slower: on the paper recipe 14 % of the weights were
-        # denormal by epoch 3 and an epoch took 4.6× as long (BENCHMARKS.md). Flushed to zero.
+        # denormal by epoch 3, which ran at 127 pairs/s against 657 flushed (BENCHMARKS.md,
+        # Throughput). Flushed to zero.
         torch.set_flush_denormal(True)
     return device
 
@@ -280,7 +281,10 @@ class _Trainer:
                       text_dim=texts.dim).to(device)
         if start is not None:  # every trained weight; the frozen word table is this run's own
             weights = {k: v for k, v in start["state_dict"].items() if k != _WORD_TABLE}
-            model.load_state_dict(weights, strict=False)
+            missing, unexpected = model.load_state_dict(weights, strict=False)
+            if set(missing) - {_WORD_TABLE} or unexpected:
+                raise Sc2DataError(f"--init {cfg.init}: its weights do not fit this model "
+                                   f"({', '.join([*missing, *unexpected][:3])}); train afresh")
         optimizer = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=cfg.lr)
         return cls(cfg, model, mcfg, optimizer, device, text_t,
                    {t: i for i, t in enumerate(texts.texts)})

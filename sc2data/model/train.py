@@ -54,7 +54,7 @@ from sc2data.ground.files import (
     writer,
     writing,
 )
-from sc2data.ground.formats import CHECKPOINT, Shape
+from sc2data.ground.formats import Shape
 from sc2data.ground.progress import bar as progress_bar
 from sc2data.ground.provenance import versions
 from sc2data.ground.resume import differences, read_record, refusal
@@ -396,21 +396,16 @@ def _model_config(cfg: TrainConfig) -> Any:
 
 
 def _init_checkpoint(cfg: TrainConfig, data: PairSet, texts: _Texts) -> dict[str, Any]:
-    """The ``--init`` run's best checkpoint, checked to fit this run: finished and intact, the
-    same layers, model settings and text encoder; else one line saying what differs."""
-    import torch
+    """The ``--init`` run's best weights (denormals flushed, as every load does), their value
+    tables and the checkpoint's sha256, checked to fit this run: finished and intact, the same
+    layers, model settings and text encoder; else one line saying what differs."""
+    from sc2data.model import mem as M
 
     run = Path(str(cfg.init))
     if not run.is_dir():
         raise Sc2DataError(f"--init {run}: no such run folder; name a finished sc2data train run")
-    check_run(run)
-    path = run / BEST
-    try:
-        blob: dict[str, Any] = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as e:
-        raise Sc2DataError(f"{path} is not a readable checkpoint ({type(e).__name__}); train "
-                           f"the run again") from None
-    CHECKPOINT.check(blob, path)
+    digest = check_run(run)["sha256"][BEST]  # finished, and best.pt the bytes training wrote
+    model, blob = M.load_checkpoint(run / BEST)
     if blob["schema"] != data.schema.to_dict():
         raise Sc2DataError(f"--init {run}: its model reads other layers than {data.path}; "
                            f"fine-tune only on pairs of the same layers")
@@ -424,8 +419,7 @@ def _init_checkpoint(cfg: TrainConfig, data: PairSet, texts: _Texts) -> dict[str
     if blob.get("vectors_source") != texts.source:
         raise Sc2DataError(f"--init {run}: its text encoder read {blob.get('vectors_source')}, "
                            f"this run {texts.source}; pass the same --vectors")
-    blob["sha256"] = sha256_file(path)
-    return blob
+    return {"tables": blob["tables"], "state_dict": model.state_dict(), "sha256": digest}
 
 
 def _run_config(cfg: TrainConfig, trainer: _Trainer, data: PairSet, *, texts: _Texts,

@@ -14,6 +14,8 @@ Narration runs wait until the MEM run (``--mem``) has finished training. Prints 
     python benchmarks/rl_experiment.py --out /tmp/rl-exp --mem RUN \\
         --steps macro=16384 paper=8192 --seeds 0 1 2 --jobs 2 \\
         --eval-episodes macro=5 paper=2
+    python benchmarks/rl_experiment.py --out /tmp/rl-exp-pot --mem RUN --rewards narration \\
+        --train-args "--shaping potential" --steps paper=8192 --seeds 0 1 2
     python benchmarks/rl_experiment.py --out /tmp/rl-exp --summary      # the table alone
 """
 
@@ -80,7 +82,7 @@ def one_run(out: Path, space: str, reward: str, seed: int, steps: int, a: argpar
     times_file = out / space / f"{name}.times.json"
     times: dict[str, float] = _read(times_file) or {}
     args = ["rl", "train", "--action-space", space, "--reward", reward, "--steps", str(steps),
-            "--seed", str(seed), "--out", str(run), "--no-progress"]
+            "--seed", str(seed), "--out", str(run), "--no-progress", *shlex.split(a.train_args)]
     if reward == "narration":
         with mem_lock:
             wait_for_mem(a.mem)
@@ -155,6 +157,9 @@ def main() -> None:
     ap.add_argument("--eval-episodes", nargs="*", default=["macro=10", "paper=10"],
                     help="SPACE=EPISODES of each evaluation (half with each start side; "
                          "sampled and argmax).")
+    ap.add_argument("--train-args", default="", help="More `rl train` options for every run, "
+                    "e.g. '--shaping potential' (one --out per setting: runs are named by "
+                    "space, reward and seed).")
     ap.add_argument("--paraphrased", type=Path, help="Also one narration run (seed 0) per action "
                     "space with this narration file.")
     ap.add_argument("--summary", action="store_true", help="Only print the table.")

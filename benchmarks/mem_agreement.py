@@ -6,9 +6,14 @@ so several MEMs are judged on the very same stacks, as many as the rollout holds
 the MEM's pair set: the rule's firings, the MEM's matches (distance < the model's threshold),
 precision, recall, and what the false matches were (`sc2data.rl.agreement.false_matches`: the
 stacks where another command's rule fired, or none did); and how many null stacks the MEM
-matched to some command.
+matched to some command; and recall on the stacks where no other rule fired (a stack where two
+rules fire, say an idle SCV sent to mine as a depot appears, is one the pair sets never hold).
+With ``--by-action``, also each command's firings split by the pysc2
+function the agent called in that step, and the MEM's matches among them: a rule that reads two
+frames cannot always tell what the step did (``collect_minerals`` fires when an idle SCV is sent
+to build as well as to mine), and this shows where the rule, not the MEM, is the one wrong.
 
-    python benchmarks/mem_agreement.py RUN DATA [RUN2 …] [--out FILE.json]
+    python benchmarks/mem_agreement.py RUN [RUN2 …] DATA [--out FILE.json] [--by-action]
 """
 
 from __future__ import annotations
@@ -24,6 +29,8 @@ import numpy as np
 import pyarrow.parquet as pq
 
 import sc2data
+from pysc2.lib import actions as sc2_actions
+
 from sc2data.rl.agreement import false_matches
 
 BATCH = 2048
@@ -42,10 +49,14 @@ def judge(run: Path, data: Path) -> dict[str, Any]:
     row = {(int(e), int(s)): k for k, (e, s) in enumerate(zip(labels.episode, labels.step))}
     fired = labels[ids].to_numpy(bool)
     matched = np.zeros_like(fired)
-    for episodes, steps, batch in sc2data.open_dataset(data).iter_batches(BATCH):
+    function = np.zeros(len(fired), dtype=np.int64)
+    ds = sc2data.open_dataset(data)
+    for episodes, steps, batch in ds.iter_batches(BATCH):
         at = np.array([row[(int(e), int(s))] for e, s in zip(episodes, steps)])
         matched[at] = mem.distances(batch, texts) < mem.threshold
+        function[at] = ds.actions(episodes, steps)["function"]
     tp = (fired & matched).sum(0)
+    alone = fired & (fired.sum(1) == 1)[:, None]  # the only rule that fired on its stack
     confused = false_matches(fired, matched, ids)
     per = {}
     for k, cid in enumerate(ids):
@@ -53,12 +64,28 @@ def judge(run: Path, data: Path) -> dict[str, Any]:
         per[cid] = {"rule_fired": n_f, "mem_matched": n_m, "tp": int(tp[k]),
                     "precision": round(100 * tp[k] / n_m, 2) if n_m else None,
                     "recall": round(100 * tp[k] / n_f, 2) if n_f else None,
-                    "false_matches": confused[cid]}
+                    "fired_alone": int(alone[:, k].sum()),
+                    "recall_alone": round(100 * (alone[:, k] & matched[:, k]).sum()
+                                          / alone[:, k].sum(), 2) if alone[:, k].any() else None,
+                    "false_matches": confused[cid],
+                    "by_action": by_action(fired[:, k], matched[:, k], function)}
     null = ~fired.any(1)
     return {"mem": str(run), "data": str(data), "stacks": int(len(fired)),
             "episodes": int(labels.episode.nunique()), "threshold": mem.threshold,
             "commands": per, "null_stacks": int(null.sum()),
             "null_matched": int((null & matched.any(1)).sum())}
+
+
+def by_action(fired: np.ndarray, matched: np.ndarray, function: np.ndarray
+              ) -> dict[str, dict[str, int]]:
+    """Where the rule fired: per pysc2 function called in the step, how many stacks and how
+    many of them the MEM matched, most frequent first."""
+    ids, counts = np.unique(function[fired], return_counts=True)
+    order = np.argsort(-counts, kind="stable")
+    return {sc2_actions.FUNCTIONS[int(ids[j])].name: {
+                "fired": int(counts[j]),
+                "matched": int((matched & fired & (function == ids[j])).sum())}
+            for j in order}
 
 
 def table(results: Sequence[dict[str, Any]]) -> str:
@@ -80,6 +107,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("runs", nargs="+", type=Path, help="MEM runs (sc2data train --out)")
     ap.add_argument("data", type=Path, help="a labelled rollout (sc2data label DATA)")
     ap.add_argument("--out", type=Path, help="JSON file for the results")
+    ap.add_argument("--by-action", action="store_true",
+                    help="also print each command's firings by the step's pysc2 function")
     args = ap.parse_args(argv)
     results = [judge(run, args.data) for run in args.runs]
     print(f"{args.data}: {results[0]['stacks']:,} stacks, {results[0]['episodes']} episodes\n")
@@ -88,6 +117,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         for cid, c in r["commands"].items():
             if c["false_matches"]:
                 print(f"{Path(r['mem']).name} {cid} false matches: {c['false_matches']}")
+    for r in results:
+        print(f"{Path(r['mem']).name} recall where no other rule fired: " + ", ".join(
+            f"{cid} {c['recall_alone']} ({c['fired_alone']})" for cid, c in r["commands"].items()))
+    if args.by_action:
+        for r in results:
+            for cid, c in r["commands"].items():
+                parts = [f"{name} {v['matched']}/{v['fired']}"
+                         for name, v in c["by_action"].items()]
+                print(f"{Path(r['mem']).name} {cid} matched / fired by action: "
+                      + ", ".join(parts))
     if args.out:
         args.out.write_text(json.dumps(results, indent=1) + "\n")
     return 0

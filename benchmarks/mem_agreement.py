@@ -27,10 +27,9 @@ from typing import Any
 
 import numpy as np
 import pyarrow.parquet as pq
-
-import sc2data
 from pysc2.lib import actions as sc2_actions
 
+import sc2data
 from sc2data.rl.agreement import false_matches
 
 BATCH = 2048

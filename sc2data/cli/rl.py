@@ -130,8 +130,9 @@ def agreement_cmd(
                                        help="JSON file [default: RUN/agreement.json]."),
 ) -> None:
     """On the states a trained policy visits: per command, how often the MEM's match agrees
-    with the labelling rule (precision, recall and F1, the rule as ground truth); and the
-    narration and rules rewards' Pearson correlation and EPIC distance."""
+    with the labelling rule (precision, recall and F1, the rule as ground truth; recall also
+    where the rule was the only one to fire); and the narration and rules rewards' Pearson
+    correlation and EPIC distance."""
     from sc2data.rl.agreement import agreement, summary
 
     require_rl("sc2data rl agreement")

@@ -14,7 +14,10 @@ MEM matched, the share the rule also fired on: how often a narration bonus is de
 often a deserved bonus is paid) and their harmonic mean F1, and what its false matches were
 (:func:`false_matches`: the stacks where another command's rule fired, or none did — the
 confusions a round of the MEM loop must fix). Stacks on which no rule fires are "null" stacks;
-the share of them the MEM matches to no command is reported too.
+the share of them the MEM matches to no command is reported too. Recall is also given on the
+stacks where the command's rule is the only one that fired (:func:`recall_alone`): a stack where
+two rules fire (an idle SCV sent to mine as a depot appears) is rare in any pair set, and a MEM
+that matches only one of its two commands loses recall there, not on the events themselves.
 
 The two rewards, judged as the field judges a learnt reward (Gleave et al. 2021, *Quantifying
 differences in reward functions*): a stack's **rules reward** is the number of rules that fire
@@ -282,6 +285,15 @@ def false_matches(fired: np.ndarray, matched: np.ndarray, ids: list[str]
     return out
 
 
+def recall_alone(fired: np.ndarray, matched: np.ndarray) -> tuple[np.ndarray, list[float | None]]:
+    """Per command, the stacks where its rule was the only one that fired, and the share of them
+    the MEM matched to it (None where there are none)."""
+    alone = fired & (fired.sum(1) == 1)[:, None]
+    n = alone.sum(0)
+    hit = (alone & matched).sum(0)
+    return n, [_ratio(int(h), int(k)) for h, k in zip(hit, n)]
+
+
 def _result(judge: _Judge, fired: np.ndarray, matched: np.ndarray, *, epic: float | None,
             seen: _Seen, cfg: Any, head: dict[str, Any]) -> dict[str, Any]:
     """``agreement.json``: ``head``, then per command and over all stacks."""
@@ -289,11 +301,13 @@ def _result(judge: _Judge, fired: np.ndarray, matched: np.ndarray, *, epic: floa
                   (fired & ~matched).sum(0))
     none = ~fired.any(1)
     confused = false_matches(fired, matched, judge.ids)
+    n_alone, r_alone = recall_alone(fired, matched)
     per = {i: {"text": t, "rule_fired": int(fired[:, k].sum()),
                "mem_matched": int(tp[k] + fp[k]), "tp": int(tp[k]), "fp": int(fp[k]),
                "fn": int(fn[k]), "precision": _ratio(int(tp[k]), int(tp[k] + fp[k])),
                "recall": _ratio(int(tp[k]), int(tp[k] + fn[k])),
                "f1": _f1(int(tp[k]), int(fp[k]), int(fn[k])),
+               "fired_alone": int(n_alone[k]), "recall_alone": r_alone[k],
                "pearson": pearson(fired[:, k], matched[:, k]), "false_matches": confused[i]}
            for k, (i, t) in enumerate(zip(judge.ids, judge.texts))}
     return {**head, "stacks": int(len(fired)),
@@ -306,7 +320,8 @@ def _result(judge: _Judge, fired: np.ndarray, matched: np.ndarray, *, epic: floa
 
 
 def summary(result: dict[str, Any]) -> list[str]:
-    """A small table: per command, rule firings, MEM matches, precision, recall and F1; then
+    """A small table: per command, rule firings, MEM matches, precision, recall, F1 and recall
+    where its rule was the only one to fire; then
     the two rewards' correlation and EPIC distance."""
     def pct(x: float | None) -> str:
         return "—" if x is None else f"{100 * x:.1f}%"
@@ -317,10 +332,11 @@ def summary(result: dict[str, Any]) -> list[str]:
     lines = [(f"{result['stacks']:,} stacks over {result['episodes']} episodes "
               f"(marines {result['marines']}), threshold {result['threshold']}"),
              (f"{'command':<20} {'rule fired':>10} {'MEM matched':>11} {'precision':>9} "
-              f"{'recall':>7} {'F1':>7}")]
+              f"{'recall':>7} {'F1':>7} {'recall, only rule':>17}")]
     for cid, c in result["commands"].items():
         lines.append(f"{cid:<20} {c['rule_fired']:>10,} {c['mem_matched']:>11,} "
-                     f"{pct(c['precision']):>9} {pct(c['recall']):>7} {pct(c.get('f1')):>7}")
+                     f"{pct(c['precision']):>9} {pct(c['recall']):>7} {pct(c.get('f1')):>7} "
+                     f"{pct(c.get('recall_alone')):>17}")
     for cid, c in result["commands"].items():
         if c.get("false_matches"):
             lines.append(f"{cid} matched where instead: " + ", ".join(

@@ -91,6 +91,8 @@ def test_agreement_reports_f1_and_the_rewards_correlation_and_epic(
     assert reward["pearson"] is None or -1.0 <= reward["pearson"] <= 1.0
     for c in result["commands"].values():  # every false match is accounted for
         assert sum(c["false_matches"].values()) >= c["fp"]
+        assert c["fired_alone"] <= c["rule_fired"]
+    assert "recall, only rule" in text
 
 
 def test_false_matches_by_hand() -> None:
@@ -106,3 +108,15 @@ def test_false_matches_by_hand() -> None:
         "barracks": {"depot": 1, "null": 1},
         "marine": {"depot": 1, "barracks": 1},
     }
+
+
+def test_recall_where_only_its_rule_fired_by_hand() -> None:
+    """The stacks of the test above: depot fired alone twice (matched once), barracks alone once
+    (missed), both on one stack (that one counts for neither); marine never fired."""
+    from sc2data.rl.agreement import recall_alone
+
+    fired = np.array([[1, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [0, 0, 0]], bool)
+    matched = np.array([[1, 0, 0], [0, 0, 0], [1, 0, 0], [1, 1, 1], [0, 1, 0]], bool)
+    n, recall = recall_alone(fired, matched)
+    assert n.tolist() == [2, 1, 0]
+    assert recall == [0.5, 0.0, None]

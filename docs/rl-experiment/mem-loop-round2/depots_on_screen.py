@@ -30,6 +30,7 @@ for run in runs:
     for lo, hi in BINS:
         m = (on_screen >= lo) & (on_screen < hi)
         if m.any():
+            also = 100 * (d[m, 1] < 0.5).mean()
             cells.append(f"{lo}-{hi} depots: n={m.sum()} d(depot) {d[m, 0].mean():.2f} "
-                         f"d(barracks) {d[m, 1].mean():.2f} also barracks {100 * (d[m, 1] < 0.5).mean():.0f}%")
+                         f"d(barracks) {d[m, 1].mean():.2f} also barracks {also:.0f}%")
     print(run.rstrip("/").split("/")[-1], "|", " ; ".join(cells))

@@ -166,13 +166,32 @@ def group_runs(runs: Sequence[RunScores]) -> dict[str, list[RunScores]]:
         by_label.setdefault(_label(members[0].config), []).append(members)
     groups: dict[str, list[RunScores]] = {}
     for label, clash in by_label.items():
-        configs = [m[0].config for m in clash]
+        configs = [_flat(m[0].config) for m in clash]
         varying = sorted(k for k in set().union(*configs) if k != "seed"
                          and len({repr(c.get(k)) for c in configs}) > 1)
-        for members in clash:
-            extra = ", ".join(f"{k}={members[0].config.get(k)}" for k in varying)
+        for members, flat in zip(clash, configs):
+            extra = ", ".join(f"{k}={_short(flat.get(k))}" for k in varying)
             groups[label + (f" [{extra}]" if extra else "")] = members
     return groups
+
+
+def _flat(config: dict[str, Any]) -> dict[str, Any]:
+    """A run's settings with nested ones (``inputs``: the digests of what the reward reads)
+    under dotted keys, so a label names only the entries that differ."""
+    out: dict[str, Any] = {}
+    for k, v in config.items():
+        if isinstance(v, dict):
+            out.update({f"{k}.{kk}": vv for kk, vv in v.items()})
+        else:
+            out[k] = v
+    return out
+
+
+def _short(value: Any) -> Any:
+    """A sha256 digest cut to its first 12 hex digits (as git shows a commit); else as is."""
+    if isinstance(value, str) and len(value) == 64 and all(c in "0123456789abcdef" for c in value):
+        return value[:12]
+    return value
 
 
 def check_comparable(runs: Sequence[RunScores]) -> None:

@@ -61,12 +61,13 @@ def test_curve_scores_average_the_last_window_episodes_ended_by_each_point() -> 
 
 def fake_run(path: Path, sampled: list[int], argmax: list[int] | None = None,
              timesteps: int = 400, seeds: list[int] = SEEDS, evaluated_at: int | None = None,
-             **settings: Any) -> Path:
+             inputs: dict[str, str] | None = None, **settings: Any) -> Path:
     """A run folder as sc2data rl train and evaluate leave it, with hand-chosen figures: a
-    curve of 4 episodes of 100 decisions, an eval.json of ``sampled``/``argmax`` marines."""
+    curve of 4 episodes of 100 decisions, an eval.json of ``sampled``/``argmax`` marines;
+    ``inputs``: the digests of what the reward reads, as config.json records them."""
     cfg = RLConfig(out=str(path), **settings)
     path.mkdir(parents=True)
-    _write_json(path / "config.json", cfg.identity())
+    _write_json(path / "config.json", {**cfg.identity(), **({"inputs": inputs} if inputs else {})})
     (path / "model.zip").write_bytes(b"")
     _write_json(path / "state.json", {"timesteps": timesteps, "env_steps": timesteps * 4,
                                       "episodes": 4, "resumes": 0})
@@ -142,6 +143,22 @@ def test_groups_are_told_apart_by_the_settings_that_differ(
     assert "paper, rules [bonus=0.1]: 1 run" in text
     assert "paper, rules [bonus=0.5]: 1 run" in text
     assert "paper, rules, potential: 1 run" in text  # its name is its own: nothing added
+
+
+def test_groups_of_other_inputs_name_the_digests_that_differ(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Two MEMs: the label names the MEM and its digest (12 hex digits), not the narration's,
+    which both share."""
+    same = "ab" * 32
+    a = fake_run(tmp_path / "a", [1, 1], action_space="paper", reward="narration", mem="m0",
+                 inputs={"mem_sha256": "0" * 64, "narration_sha256": same})
+    b = fake_run(tmp_path / "b", [2, 2], action_space="paper", reward="narration", mem="m1",
+                 inputs={"mem_sha256": "1" * 64, "narration_sha256": same})
+    code, text, err = run_cli(["rl", "compare", a, b, "--reps", "50"], capsys)
+    assert code == 0, err
+    assert f"paper, narration [inputs.mem_sha256={'0' * 12}, mem=m0]: 1 run" in text
+    assert f"paper, narration [inputs.mem_sha256={'1' * 12}, mem=m1]: 1 run" in text
+    assert "narration_sha256" not in text
 
 
 def test_bad_input_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -30,7 +30,7 @@ import pyarrow.parquet as pq
 from pysc2.lib import actions as sc2_actions
 
 import sc2data
-from sc2data.rl.agreement import false_matches
+from sc2data.rl.agreement import by_action, false_matches
 
 BATCH = 2048
 """Stacks read and scored at once."""
@@ -48,12 +48,13 @@ def judge(run: Path, data: Path) -> dict[str, Any]:
     row = {(int(e), int(s)): k for k, (e, s) in enumerate(zip(labels.episode, labels.step))}
     fired = labels[ids].to_numpy(bool)
     matched = np.zeros_like(fired)
-    function = np.zeros(len(fired), dtype=np.int64)
+    function = np.zeros(len(fired), dtype=object)
     ds = sc2data.open_dataset(data)
     for episodes, steps, batch in ds.iter_batches(BATCH):
         at = np.array([row[(int(e), int(s))] for e, s in zip(episodes, steps)])
         matched[at] = mem.distances(batch, texts) < mem.threshold
-        function[at] = ds.actions(episodes, steps)["function"]
+        function[at] = [sc2_actions.FUNCTIONS[int(f)].name
+                        for f in ds.actions(episodes, steps)["function"]]
     tp = (fired & matched).sum(0)
     alone = fired & (fired.sum(1) == 1)[:, None]  # the only rule that fired on its stack
     confused = false_matches(fired, matched, ids)
@@ -73,18 +74,6 @@ def judge(run: Path, data: Path) -> dict[str, Any]:
             "episodes": int(labels.episode.nunique()), "threshold": mem.threshold,
             "commands": per, "null_stacks": int(null.sum()),
             "null_matched": int((null & matched.any(1)).sum())}
-
-
-def by_action(fired: np.ndarray, matched: np.ndarray, function: np.ndarray
-              ) -> dict[str, dict[str, int]]:
-    """Where the rule fired: per pysc2 function called in the step, how many stacks and how
-    many of them the MEM matched, most frequent first."""
-    ids, counts = np.unique(function[fired], return_counts=True)
-    order = np.argsort(-counts, kind="stable")
-    return {sc2_actions.FUNCTIONS[int(ids[j])].name: {
-                "fired": int(counts[j]),
-                "matched": int((matched & fired & (function == ids[j])).sum())}
-            for j in order}
 
 
 def table(results: Sequence[dict[str, Any]]) -> str:

@@ -17,7 +17,11 @@ confusions a round of the MEM loop must fix). Stacks on which no rule fires are 
 the share of them the MEM matches to no command is reported too. Recall is also given on the
 stacks where the command's rule is the only one that fired (:func:`recall_alone`): a stack where
 two rules fire (an idle SCV sent to mine as a depot appears) is rare in any pair set, and a MEM
-that matches only one of its two commands loses recall there, not on the events themselves.
+that matches only one of its two commands loses recall there, not on the events themselves. And
+each command's firings are split, in the JSON (``by_action``), by what the policy chose in the
+step (:func:`by_action`: the pysc2 function, or the macro): a rule reads two frames and cannot
+always tell what the step did (``collect_minerals`` fires when an idle SCV is sent to build as
+well as to mine).
 
 The two rewards, judged as the field judges a learnt reward (Gleave et al. 2021, *Quantifying
 differences in reward functions*): a stack's **rules reward** is the number of rules that fire
@@ -215,6 +219,8 @@ class _Seen:
     drawn: list[tuple[int, int]] = field(default_factory=list)
     support: list[int] = field(default_factory=list)
     marines: list[int] = field(default_factory=list)
+    actions: list[str] = field(default_factory=list)
+    """What the policy chose (``info["action"]``) in the decision each judged stack belongs to."""
 
 
 def _play(run: Path, cfg: Any, judge: _Judge, *, episodes: int, deterministic: bool) -> _Seen:
@@ -241,6 +247,7 @@ def _play(run: Path, cfg: Any, judge: _Judge, *, episodes: int, deterministic: b
                 new = env.frames if not rule_frames else env.frames[1:]
                 rule_frames += [judge.rule_schema.extract(f) for f in new]
                 mem_frames += [judge.scorer.schema.extract(f) for f in new]
+                seen.actions += [str(info["action"])] * (len(env.frames) - 1)
             seen.marines.append(int(info["marines"]))
             steps = np.arange(len(rule_frames) - 1)
             if not len(steps):
@@ -294,6 +301,18 @@ def recall_alone(fired: np.ndarray, matched: np.ndarray) -> tuple[np.ndarray, li
     return n, [_ratio(int(h), int(k)) for h, k in zip(hit, n)]
 
 
+def by_action(fired: np.ndarray, matched: np.ndarray, actions: np.ndarray
+              ) -> dict[str, dict[str, int]]:
+    """Where one command's rule fired (``fired``, ``matched``: that command's columns): per
+    action the policy chose in the step, the stacks and how many the MEM matched, most
+    frequent first."""
+    names, counts = np.unique(np.asarray(actions)[fired], return_counts=True)
+    order = np.argsort(-counts, kind="stable")
+    return {str(names[j]): {"fired": int(counts[j]),
+                            "matched": int((matched & fired & (actions == names[j])).sum())}
+            for j in order}
+
+
 def _result(judge: _Judge, fired: np.ndarray, matched: np.ndarray, *, epic: float | None,
             seen: _Seen, cfg: Any, head: dict[str, Any]) -> dict[str, Any]:
     """``agreement.json``: ``head``, then per command and over all stacks."""
@@ -302,12 +321,14 @@ def _result(judge: _Judge, fired: np.ndarray, matched: np.ndarray, *, epic: floa
     none = ~fired.any(1)
     confused = false_matches(fired, matched, judge.ids)
     n_alone, r_alone = recall_alone(fired, matched)
+    actions = np.array(seen.actions, dtype=object)
     per = {i: {"text": t, "rule_fired": int(fired[:, k].sum()),
                "mem_matched": int(tp[k] + fp[k]), "tp": int(tp[k]), "fp": int(fp[k]),
                "fn": int(fn[k]), "precision": _ratio(int(tp[k]), int(tp[k] + fp[k])),
                "recall": _ratio(int(tp[k]), int(tp[k] + fn[k])),
                "f1": _f1(int(tp[k]), int(fp[k]), int(fn[k])),
                "fired_alone": int(n_alone[k]), "recall_alone": r_alone[k],
+               "by_action": by_action(fired[:, k], matched[:, k], actions),
                "pearson": pearson(fired[:, k], matched[:, k]), "false_matches": confused[i]}
            for k, (i, t) in enumerate(zip(judge.ids, judge.texts))}
     return {**head, "stacks": int(len(fired)),
@@ -321,7 +342,7 @@ def _result(judge: _Judge, fired: np.ndarray, matched: np.ndarray, *, epic: floa
 
 def summary(result: dict[str, Any]) -> list[str]:
     """A small table: per command, rule firings, MEM matches, precision, recall, F1 and recall
-    where its rule was the only one to fire; then
+    where its rule was the only one to fire; what the false matches were; then
     the two rewards' correlation and EPIC distance."""
     def pct(x: float | None) -> str:
         return "—" if x is None else f"{100 * x:.1f}%"

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from sc2data.rl.agreement import canonical, epic_distance, pearson, pearson_distance
+from sc2data.rl.envs import MACROS
 
 ALL = (np.array([0, 0, 1, 1]), np.array([0, 1, 0, 1]))
 """Every transition over two states: 0→0, 0→1, 1→0, 1→1."""
@@ -92,6 +93,10 @@ def test_agreement_reports_f1_and_the_rewards_correlation_and_epic(
     for c in result["commands"].values():  # every false match is accounted for
         assert sum(c["false_matches"].values()) >= c["fp"]
         assert c["fired_alone"] <= c["rule_fired"]
+        by = c["by_action"]  # every firing under the action chosen in its step
+        assert sum(v["fired"] for v in by.values()) == c["rule_fired"]
+        assert sum(v["matched"] for v in by.values()) == c["tp"]
+        assert set(by) <= set(MACROS)
     assert "recall, only rule" in text
 
 
@@ -120,3 +125,13 @@ def test_recall_where_only_its_rule_fired_by_hand() -> None:
     n, recall = recall_alone(fired, matched)
     assert n.tolist() == [2, 1, 0]
     assert recall == [0.5, 0.0, None]
+
+
+def test_firings_by_the_action_of_their_step_by_hand() -> None:
+    from sc2data.rl.agreement import by_action
+
+    actions = np.array(["build", "gather", "build", "no_op", "build"], dtype=object)
+    fired = np.array([1, 1, 1, 0, 0], bool)
+    matched = np.array([1, 0, 0, 1, 1], bool)
+    assert by_action(fired, matched, actions) == {"build": {"fired": 2, "matched": 1},
+                                                  "gather": {"fired": 1, "matched": 0}}

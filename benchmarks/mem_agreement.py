@@ -7,7 +7,7 @@ the MEM's pair set: the rule's firings, the MEM's matches (distance < the model'
 precision, recall, and what the false matches were (`sc2data.rl.agreement.false_matches`: the
 stacks where another command's rule fired, or none did); and how many null stacks the MEM
 matched to some command; and recall on the stacks where no other rule fired (a stack where two
-rules fire, say an idle SCV sent to mine as a depot appears, is one the pair sets never hold).
+rules fire, say an idle SCV sent to mine as a depot appears, is one the pair sets rarely hold).
 With ``--by-action``, also each command's firings split by the pysc2
 function the agent called in that step, and the MEM's matches among them: a rule that reads two
 frames cannot always tell what the step did (``collect_minerals`` fires when an idle SCV is sent
@@ -30,7 +30,7 @@ import pyarrow.parquet as pq
 from pysc2.lib import actions as sc2_actions
 
 import sc2data
-from sc2data.rl.agreement import by_action, false_matches
+from sc2data.rl.agreement import by_action, false_matches, recall_alone
 
 BATCH = 2048
 """Stacks read and scored at once."""
@@ -56,7 +56,7 @@ def judge(run: Path, data: Path) -> dict[str, Any]:
         function[at] = [sc2_actions.FUNCTIONS[int(f)].name
                         for f in ds.actions(episodes, steps)["function"]]
     tp = (fired & matched).sum(0)
-    alone = fired & (fired.sum(1) == 1)[:, None]  # the only rule that fired on its stack
+    n_alone, r_alone = recall_alone(fired, matched)
     confused = false_matches(fired, matched, ids)
     per = {}
     for k, cid in enumerate(ids):
@@ -64,9 +64,8 @@ def judge(run: Path, data: Path) -> dict[str, Any]:
         per[cid] = {"rule_fired": n_f, "mem_matched": n_m, "tp": int(tp[k]),
                     "precision": round(100 * tp[k] / n_m, 2) if n_m else None,
                     "recall": round(100 * tp[k] / n_f, 2) if n_f else None,
-                    "fired_alone": int(alone[:, k].sum()),
-                    "recall_alone": round(100 * (alone[:, k] & matched[:, k]).sum()
-                                          / alone[:, k].sum(), 2) if alone[:, k].any() else None,
+                    "fired_alone": int(n_alone[k]),
+                    "recall_alone": None if r_alone[k] is None else round(100 * r_alone[k], 2),
                     "false_matches": confused[cid],
                     "by_action": by_action(fired[:, k], matched[:, k], function)}
     null = ~fired.any(1)

@@ -116,8 +116,8 @@ def test_false_matches_by_hand() -> None:
 
 
 def test_recall_where_only_its_rule_fired_by_hand() -> None:
-    """The stacks of the test above: depot fired alone twice (matched once), barracks alone once
-    (missed), both on one stack (that one counts for neither); marine never fired."""
+    """Depot fired alone twice (matched once), barracks alone once (missed), both on one stack
+    (that one counts for neither); marine never fired."""
     from sc2data.rl.agreement import recall_alone
 
     fired = np.array([[1, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [0, 0, 0]], bool)

@@ -15,7 +15,10 @@ and argmax play apart. Per group, over its runs:
 * **sample-efficiency curves**: at ``points`` numbers of decisions between the latest first
   training episode and the earliest last one of all runs, each run's mean marines over its last
   ``window`` training episodes ended by then, and the IQM of those over the group's runs with
-  its CI band.
+  its CI band;
+* **performance profiles** (rliable's score distributions): the fraction of the group's runs
+  whose final sampled score exceeds τ, for :data:`PROFILE_POINTS` values of τ from 0 to the
+  best run's score, with a 95 % bootstrap band — the whole spread of runs, where the IQM gives its middle.
 
 Reference agents (``sc2data rl baselines``) are drawn as horizontal lines and listed beside:
 their evaluation episodes must be the runs' (the same seeds and episode length).
@@ -25,6 +28,7 @@ All runs must be of one action space: scores of the two spaces are not one exper
 from __future__ import annotations
 
 import io
+import textwrap
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,6 +41,8 @@ from sc2data.ground.files import write_atomic, writing
 
 MODES: tuple[str, ...] = ("sampled", "argmax")
 CONFIDENCE = 0.95
+PROFILE_POINTS = 101
+"""Thresholds τ of a performance profile."""
 
 
 @dataclass(frozen=True)
@@ -117,6 +123,15 @@ def curve_intervals(tables: dict[str, np.ndarray], reps: int = 2000, seed: int =
     CI band."""
     return _bootstrap(tables, lambda s: np.array([iqm(s[..., k]) for k in range(s.shape[-1])]),
                       reps, seed)
+
+
+def profile_intervals(tables: dict[str, np.ndarray], taus: np.ndarray, reps: int = 2000,
+                      seed: int = 0) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """Per name, the fraction of a (runs, tasks) table's scores above each τ of ``taus``
+    (rliable's ``score_distributions``), and its (2, len(taus)) CI band."""
+    from rliable import library as rly
+
+    return _bootstrap(tables, lambda s: np.asarray(rly.score_distributions(s, taus)), reps, seed)
 
 
 def curve_scores(curve: tuple[np.ndarray, np.ndarray], at: np.ndarray, window: int
@@ -265,6 +280,7 @@ def compare(runs: Sequence[Path], out: Path | None = None, *, baselines: Path | 
         record["improvement"] = [{"x": x, "y": y, "mode": "sampled", "p": found[f"{x} > {y}"][0],
                                   "ci": list(found[f"{x} > {y}"][1:])} for x, y in pairs]
     record["curves"] = _curves(groups, points, window, reps, seed)
+    record["profiles"] = _profiles(groups, reps, seed)
     if reference is not None:
         record["reference"] = {k: {"space": v["space"], "mean": v["mean"], "std": v["std"],
                                    "iqm": v["iqm"]} for k, v in reference["agents"].items()}
@@ -316,17 +332,36 @@ def _curves(groups: dict[str, list[RunScores]], points: int, window: int, reps: 
                            "hi": [float(v) for v in interval[g][1]]} for g in groups}}
 
 
+def _profiles(groups: dict[str, list[RunScores]], reps: int, seed: int) -> dict[str, Any]:
+    """Performance profiles of the final sampled scores (see the module docstring)."""
+    tables = {g: np.array([[r.final["sampled"]] for r in members])
+              for g, members in groups.items()}
+    top = max(float(t.max()) for t in tables.values())
+    taus = np.linspace(0.0, max(top, 1.0), PROFILE_POINTS)
+    point, interval = profile_intervals(tables, taus, reps, seed)
+    return {"mode": "sampled", "tau": [float(t) for t in taus],
+            "groups": {g: {"fraction": [float(v) for v in point[g]],
+                           "lo": [float(v) for v in interval[g][0]],
+                           "hi": [float(v) for v in interval[g][1]]} for g in groups}}
+
+
+def above(record: dict[str, Any], threshold: float) -> dict[str, tuple[int, int]]:
+    """Per group, (runs whose final sampled score exceeds ``threshold``, runs)."""
+    return {g: (sum(s > threshold for s in e["sampled"]["scores"]), len(e["sampled"]["scores"]))
+            for g, e in record["groups"].items()}
+
+
 def _figure(record: dict[str, Any], window: int) -> bytes:
-    """Sample-efficiency curves with CI bands (left) and final IQMs with CIs (right), the
-    reference agents as horizontal lines in both."""
+    """Sample-efficiency curves with CI bands (left), final IQMs with CIs (middle) and the
+    performance profiles (right), the reference agents as lines in all three."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from rliable import plot_utils
 
-    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.2),
-                                      gridspec_kw={"width_ratios": [3, 2]})
+    fig, (left, right, prof) = plt.subplots(1, 3, figsize=(15, 4.2),
+                                            gridspec_kw={"width_ratios": [3, 2, 2]})
     names = list(record["groups"])
     colors = {g: f"C{i}" for i, g in enumerate(names)}
     curves = record.get("curves") or {}
@@ -349,8 +384,9 @@ def _figure(record: dict[str, Any], window: int) -> bytes:
             right.errorbar(e["iqm"], y, xerr=[[e["iqm"] - e["ci"][0]], [e["ci"][1] - e["iqm"]]],
                            fmt="o" if mode == "sampled" else "s", color=colors[g],
                            mfc=colors[g] if mode == "sampled" else "white", capsize=3)
-    right.set_yticks(range(len(names)), [f"{g} ({len(record['groups'][g]['runs'])})"
-                                         for g in names], fontsize=7)
+    right.set_yticks(range(len(names)), [
+        textwrap.fill(f"{g} ({len(record['groups'][g]['runs'])})", 34) for g in names],
+        fontsize=7)
     right.set_xlabel("final marines per episode: IQM, 95 % CI\n(● sampled, □ argmax)",
                      fontsize=8)
     right.grid(alpha=0.3, axis="x")
@@ -363,7 +399,22 @@ def _figure(record: dict[str, Any], window: int) -> bytes:
                       xycoords=("axes fraction", "data"), fontsize=7, color="0.3", va="bottom",
                       ha="right")
     right.set_ylim(-0.6, len(names) - 0.4)
-    handles = [plt.Line2D([], [], color=colors[g], label=g) for g in names]
+    profiles = record.get("profiles") or {}
+    if profiles:
+        taus = np.array(profiles["tau"])
+        for g in names:
+            c = profiles["groups"][g]
+            prof.plot(taus, c["fraction"], color=colors[g], lw=1.5, drawstyle="steps-post")
+            prof.fill_between(taus, c["lo"], c["hi"], color=colors[g], alpha=0.15, step="post")
+        for name, ref in (record.get("reference") or {}).items():
+            if not (name.startswith("uniform-") and ref["space"] != record["action_space"]):
+                prof.axvline(ref["mean"], color="0.4", lw=1,
+                             ls=":" if name.startswith("uniform") else "--")
+        prof.set_xlabel("final marines per episode τ (sampled)", fontsize=8)
+        prof.set_ylabel("fraction of runs with score > τ", fontsize=8)
+        prof.set_ylim(-0.02, 1.02)
+        prof.grid(alpha=0.3)
+    handles = [plt.Line2D([], [], color=colors[g], label=textwrap.fill(g, 48)) for g in names]
     left.legend(handles=handles, fontsize=7, loc="best")
     fig.suptitle(f"BuildMarines, {record['action_space']} space: {record['episodes']} "
                  f"evaluation episodes a run, {record['reps']} bootstrap resamples", fontsize=9)
@@ -384,6 +435,13 @@ def summary(record: dict[str, Any]) -> list[str]:
             f"{mode} IQM {e[mode]['iqm']:.2f} [{e[mode]['ci'][0]:.2f}, {e[mode]['ci'][1]:.2f}]"
             for mode in MODES) + f" (decisions {min(e['decisions']):,}"
             + (f"–{max(e['decisions']):,})" if max(e["decisions"]) != min(e["decisions"]) else ")"))
+    uniform = next((ref for name, ref in (record.get("reference") or {}).items()
+                    if name.startswith("uniform-") and ref["space"] == record["action_space"]),
+                   None)
+    if uniform is not None:
+        lines.append(f"runs above the masked uniform policy ({uniform['mean']:.2f}), sampled: "
+                     + "; ".join(f"{g} {k} of {n}"
+                                 for g, (k, n) in above(record, uniform["mean"]).items()))
     for p in record["improvement"]:
         lines.append(f"P({p['x']} > {p['y']}) = {p['p']:.2f} [{p['ci'][0]:.2f}, {p['ci'][1]:.2f}]"
                      f" ({p['mode']})")

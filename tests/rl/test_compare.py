@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from sc2data.rl import runs
-from sc2data.rl.compare import curve_scores, improvement, improvement_intervals, iqm, iqm_intervals
+from sc2data.rl.compare import (above, curve_scores, improvement, improvement_intervals, iqm,
+                                iqm_intervals, profile_intervals)
 from sc2data.rl.evaluate import PROTOCOL, scores
 from sc2data.rl.train import RLConfig, _write_json
 from tests.cli import assert_one_line_error, run_cli
@@ -49,6 +50,19 @@ def test_bootstrap_intervals_hold_the_point_and_are_seeded() -> None:
     assert iqm_intervals(tables, reps=500, seed=1) == found
     p, plo, phi = improvement_intervals({"a>f": (tables["a"], tables["flat"])}, 200)["a>f"]
     assert (p, plo, phi) == (0.0, 0.0, 0.0)
+
+
+def test_profiles_count_the_runs_above_each_threshold() -> None:
+    tables = {"a": np.array([[1.0], [5.0], [9.0]]), "flat": np.full((2, 1), 3.0)}
+    taus = np.array([0.0, 1.0, 4.0, 9.0])
+    point, band = profile_intervals(tables, taus, reps=300, seed=2)
+    # strictly above: 1, 5, 9 > 0; 5, 9 > 1 and > 4; none > 9
+    assert point["a"].tolist() == pytest.approx([1.0, 2 / 3, 2 / 3, 0.0])
+    assert point["flat"].tolist() == [1.0, 1.0, 0.0, 0.0]
+    assert band["flat"].tolist() == [[1.0, 1.0, 0.0, 0.0]] * 2  # equal runs: no spread
+    lo, hi = band["a"]
+    assert (lo <= point["a"]).all() and (point["a"] <= hi).all() and lo[1] < hi[1]
+    assert profile_intervals(tables, taus, reps=300, seed=2)[1]["a"].tolist() == band["a"].tolist()
 
 
 def test_curve_scores_average_the_last_window_episodes_ended_by_each_point() -> None:
@@ -125,6 +139,15 @@ def test_compare_groups_seeds_and_reports_hand_computed_figures(
     assert curves["decisions"][0] == 100 and curves["decisions"][-1] == 400
     assert "P(paper, narration > paper, sparse) = 0.58" in text
     assert "reference uniform-paper (paper): 14.00" in text
+    # performance profiles: 101 thresholds from 0 to the best run's 4
+    prof = record["profiles"]
+    assert prof["tau"][0] == 0.0 and prof["tau"][-1] == 4.0 and len(prof["tau"]) == 101
+    assert prof["groups"]["paper, narration"]["fraction"][0] == 1.0  # 1, 2, 3, 4 > 0
+    assert prof["groups"]["paper, sparse"]["fraction"][0] == pytest.approx(2 / 3)  # 2, 4 > 0
+    assert prof["groups"]["paper, sparse"]["fraction"][-1] == 0.0
+    assert above(record, 2.5) == {"paper, narration": (2, 4), "paper, sparse": (1, 3)}
+    assert ("runs above the masked uniform policy (14.00), sampled: paper, narration 0 of 4; "
+            "paper, sparse 0 of 3") in text
     # --against: only the pairs over that group
     code, text, err = run_cli(["rl", "compare", *runs, "--against", "paper, narration",
                                "--reps", "100"], capsys)

@@ -18,7 +18,8 @@ and argmax play apart. Per group, over its runs:
   its CI band;
 * **performance profiles** (rliable's score distributions): the fraction of the group's runs
   whose final sampled score exceeds τ, for :data:`PROFILE_POINTS` values of τ from 0 to the
-  best run's score, with a 95 % bootstrap band — the whole spread of runs, where the IQM gives its middle.
+  best run's score, with a 95 % bootstrap band — the whole spread of runs, where the IQM
+  gives its middle.
 
 Reference agents (``sc2data rl baselines``) are drawn as horizontal lines and listed beside:
 their evaluation episodes must be the runs' (the same seeds and episode length).

@@ -11,8 +11,15 @@ import numpy as np
 import pytest
 
 from sc2data.rl import runs
-from sc2data.rl.compare import (above, curve_scores, improvement, improvement_intervals, iqm,
-                                iqm_intervals, profile_intervals)
+from sc2data.rl.compare import (
+    above,
+    curve_scores,
+    improvement,
+    improvement_intervals,
+    iqm,
+    iqm_intervals,
+    profile_intervals,
+)
 from sc2data.rl.evaluate import PROTOCOL, scores
 from sc2data.rl.train import RLConfig, _write_json
 from tests.cli import assert_one_line_error, run_cli

@@ -22,6 +22,8 @@ wrong type or an impossible count is an error that names the field. Example (the
     null_states = 50000                # states no rule fires on, each paired as a mismatch
     mismatch = "uniform"               # mismatched command: uniform over those not satisfied
 
+    # multi_match = true: a state drawn for one command whose other rules fire too is also
+    # paired, matched, with each of those commands (extra matched pairs; see sc2data.pairs.draw)
     # mismatch = "confusable": a share of each listed command's mismatched pairs name one of the
     # commands its states are mistaken for (hard negatives; `sc2data rl agreement` shows them)
     # confusable_share = 0.5
@@ -135,6 +137,8 @@ class PairSpec:
     """``mismatch = "confusable"``: per command id, the commands its states are mistaken for."""
     confusable_share: float = 0.5
     """The share of such a command's mismatched pairs drawn among its confusable commands."""
+    multi_match: bool = False
+    """A drawn state that satisfies other commands too is also matched with each of them."""
 
 
 @dataclass(frozen=True)
@@ -181,6 +185,8 @@ class Recipe:
             del d["sources"]
         if self.pairs.mismatch != "confusable":  # likewise
             del d["pairs"]["confusable"], d["pairs"]["confusable_share"]
+        if not self.pairs.multi_match:  # likewise
+            del d["pairs"]["multi_match"]
         else:
             d["pairs"]["confusable"] = {k: list(v) for k, v in self.pairs.confusable.items()}
         return d
@@ -277,7 +283,7 @@ def parse(data: Mapping[str, Any], source: str = "<recipe>") -> Recipe:
     p = dict(data["pairs"])
     _check_keys(f"{w} [pairs]", p, {"states_per_command": int, "null_states": int,
                                     "mismatch": str, "confusable": dict,
-                                    "confusable_share": (int, float)},
+                                    "confusable_share": (int, float), "multi_match": bool},
                 required=("states_per_command", "null_states"))
     p["confusable"] = _confusable(w, p, commands)
     if "confusable_share" in p:

@@ -9,6 +9,13 @@ Kinds of pair (paper §3.3, "Dataset"):
   are mistaken for instead (hard negatives: :func:`confusable_mismatches`).
 * **null** — a state no command's rule fires on, with a command drawn uniformly; target 1.
 
+A state is drawn for one command (the scarcest of those its rules satisfy). With ``multi_match =
+true`` a state drawn so whose other commands' rules fire too is also paired, matched, with each
+of them — "collect minerals" and "build a supply depot" on the step an idle SCV starts a depot
+beside it — so the model learns to place such a state within reach of every command it
+satisfies; these extra matched pairs (no generator call: everything else is drawn as without
+them) come on top of the recipe's counts.
+
 States are assigned to train/val/test either by episode (default: no episode on two sides, so
 adjacent, near-identical frames cannot leak across the split) or at random over pairs, as the paper
 did. Each command's quota and the null quota are apportioned over the splits by largest remainder,
@@ -230,9 +237,11 @@ def _choose(recipe: Recipe, s: _Stacks, split_of: np.ndarray, *, quotas: np.ndar
 
 
 def _pair_columns(s: _Stacks, chosen: list[tuple[int, np.ndarray, np.ndarray]], ids: np.ndarray,
-                  n_cmd: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
+                  n_cmd: int, rng: np.random.Generator, multi_match: bool = False
+                  ) -> dict[str, np.ndarray]:
     """The pairs of the states drawn, column by column: a matched and a mismatched pair per
-    command state, a null pair (a random command) per null state."""
+    command state (``multi_match``: and a matched pair with each other command it satisfies),
+    a null pair (a random command) per null state."""
     columns: dict[str, list[np.ndarray]] = {k: [] for k in ("pool", "idx", "cmd", "target",
                                                              "kind", "label")}
 
@@ -251,6 +260,11 @@ def _pair_columns(s: _Stacks, chosen: list[tuple[int, np.ndarray, np.ndarray]], 
             continue
         add(pool, idx, cmd, 0.0, "matched", ids[cmd])
         add(pool, idx, _draw_mismatch(s.fires[idx], rng), 1.0, "mismatched", ids[cmd])
+        if multi_match:
+            also = s.fires[idx].copy()
+            also[np.arange(len(idx)), cmd] = False
+            rows, others = np.nonzero(also)
+            add(pool, idx[rows], others, 0.0, "matched", ids[cmd[rows]])
     return {k: np.concatenate(v) for k, v in columns.items()}
 
 
@@ -260,7 +274,7 @@ def _pair_table(recipe: Recipe, s: _Stacks, chosen: list[tuple[int, np.ndarray, 
     training pairs' texts drawn from the training phrasings."""
     commands = recipe.commands
     ids = np.array([c.id for c in commands] + [""], dtype=object)  # ids[-1] = "" for null
-    col = _pair_columns(s, chosen, ids, len(commands), rng)
+    col = _pair_columns(s, chosen, ids, len(commands), rng, recipe.pairs.multi_match)
     if recipe.pairs.mismatch == "confusable":
         col["cmd"] = confusable_mismatches(recipe, s.fires[col["idx"]], col["cmd"],
                                            col["kind"] == "mismatched", col["label"])

@@ -245,3 +245,32 @@ def test_confusable_mismatches_name_the_listed_command_and_change_nothing_else(
     again = build_pairs(three({"mismatch": "confusable", "confusable_share": share,
                                "confusable": {"build_scv": ["train_marine"]}}), data).to_pydict()
     assert again == t  # deterministic
+
+
+# --- multi_match: a state that satisfies several commands, matched with each
+
+def test_multi_match_adds_a_matched_pair_for_every_other_command_a_drawn_state_satisfies() -> None:
+    data = labelled3()
+    key = {(int(e), int(s)): f for e, s, f in zip(data.episode, data.step, data.fires)}
+    plain = build_pairs(three(), data).to_pylist()
+    multi = build_pairs(three({"multi_match": True}), data).to_pylist()
+    rows = [tuple(sorted(r.items())) for r in multi]
+    extra = list(rows)
+    for r in plain:  # every pair of the plain recipe is there, drawn alike
+        extra.remove(tuple(sorted(r.items())))
+    drawn = {(r["split"], r["episode"], r["step"], r["label"]) for r in plain
+             if r["kind"] == "matched"}
+    expect = sorted((s, e, st, THREE[c], lab) for s, e, st, lab in drawn
+                    for c in np.flatnonzero(key[(e, st)]) if THREE[c] != lab)
+    got = sorted((d["split"], d["episode"], d["step"], d["command_id"], d["label"])
+                 for d in map(dict, extra))
+    assert got == expect and len(got) > 5  # labelled3 has states where two rules fire
+    assert all(dict(d)["kind"] == "matched" and dict(d)["target"] == 0.0 for d in extra)
+    assert build_pairs(three({"multi_match": True}), data).to_pylist() == multi
+
+
+def test_multi_match_is_recorded_only_when_set() -> None:
+    assert "multi_match" not in three().to_dict()["pairs"]  # older recipes keep their identity
+    assert three({"multi_match": True}).to_dict()["pairs"]["multi_match"] is True
+    with pytest.raises(Exception, match=r"multi_match must be bool"):
+        three({"multi_match": "yes"})

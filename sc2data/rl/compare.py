@@ -15,7 +15,9 @@ and argmax play apart. Per group, over its runs:
 * **sample-efficiency curves**: at ``points`` numbers of decisions between the latest first
   training episode and the earliest last one of all runs, each run's mean marines over its last
   ``window`` training episodes ended by then, and the IQM of those over the group's runs with
-  its CI band;
+  its CI band, and, for each pair of groups compared, the first of those points where X's IQM
+  curve reaches Y's last value (``reach``: how many decisions X needs for what Y ends with,
+  read on the training curves of both, so both are sampled play on training episodes);
 * **performance profiles** (rliable's score distributions): the fraction of the group's runs
   whose final sampled score exceeds τ, for :data:`PROFILE_POINTS` values of τ from 0 to the
   best run's score, with a 95 % bootstrap band — the whole spread of runs, where the IQM
@@ -133,6 +135,14 @@ def profile_intervals(tables: dict[str, np.ndarray], taus: np.ndarray, reps: int
     from rliable import library as rly
 
     return _bootstrap(tables, lambda s: np.asarray(rly.score_distributions(s, taus)), reps, seed)
+
+
+def reach(decisions: Sequence[int], curve: Sequence[float], target: float) -> int | None:
+    """The first number of decisions at which ``curve`` is at least ``target`` (None: never)."""
+    for x, v in zip(decisions, curve):
+        if v >= target:
+            return int(x)
+    return None
 
 
 def curve_scores(curve: tuple[np.ndarray, np.ndarray], at: np.ndarray, window: int
@@ -281,6 +291,12 @@ def compare(runs: Sequence[Path], out: Path | None = None, *, baselines: Path | 
         record["improvement"] = [{"x": x, "y": y, "mode": "sampled", "p": found[f"{x} > {y}"][0],
                                   "ci": list(found[f"{x} > {y}"][1:])} for x, y in pairs]
     record["curves"] = _curves(groups, points, window, reps, seed)
+    if record["curves"]:
+        c = record["curves"]
+        record["reach"] = [{"x": x, "y": y, "target": c["groups"][y]["iqm"][-1],
+                            "decisions": reach(c["decisions"], c["groups"][x]["iqm"],
+                                               c["groups"][y]["iqm"][-1]),
+                            "of": c["decisions"][-1]} for x, y in pairs]
     record["profiles"] = _profiles(groups, reps, seed)
     if reference is not None:
         record["reference"] = {k: {"space": v["space"], "mean": v["mean"], "std": v["std"],
@@ -436,6 +452,11 @@ def summary(record: dict[str, Any]) -> list[str]:
             f"{mode} IQM {e[mode]['iqm']:.2f} [{e[mode]['ci'][0]:.2f}, {e[mode]['ci'][1]:.2f}]"
             for mode in MODES) + f" (decisions {min(e['decisions']):,}"
             + (f"–{max(e['decisions']):,})" if max(e["decisions"]) != min(e["decisions"]) else ")"))
+    for r in record.get("reach", []):
+        lines.append(f"{r['x']} reaches {r['y']}'s last training IQM ({r['target']:.2f}) "
+                     + (f"at {r['decisions']:,} of {r['of']:,} decisions "
+                        f"({r['decisions'] / r['of']:.2f})" if r["decisions"] is not None
+                        else f"nowhere in {r['of']:,} decisions"))
     uniform = next((ref for name, ref in (record.get("reference") or {}).items()
                     if name.startswith("uniform-") and ref["space"] == record["action_space"]),
                    None)

@@ -19,6 +19,7 @@ from sc2data.rl.compare import (
     iqm,
     iqm_intervals,
     profile_intervals,
+    reach,
 )
 from sc2data.rl.evaluate import PROTOCOL, scores
 from sc2data.rl.train import RLConfig, _write_json
@@ -70,6 +71,12 @@ def test_profiles_count_the_runs_above_each_threshold() -> None:
     lo, hi = band["a"]
     assert (lo <= point["a"]).all() and (point["a"] <= hi).all() and lo[1] < hi[1]
     assert profile_intervals(tables, taus, reps=300, seed=2)[1]["a"].tolist() == band["a"].tolist()
+
+
+def test_reach_is_the_first_point_at_or_above_the_target() -> None:
+    assert reach([10, 20, 30], [1.0, 3.0, 2.0], 3.0) == 20
+    assert reach([10, 20, 30], [1.0, 3.0, 2.0], 0.5) == 10
+    assert reach([10, 20, 30], [1.0, 3.0, 2.0], 3.5) is None
 
 
 def test_curve_scores_average_the_last_window_episodes_ended_by_each_point() -> None:
@@ -146,6 +153,13 @@ def test_compare_groups_seeds_and_reports_hand_computed_figures(
     assert curves["decisions"][0] == 100 and curves["decisions"][-1] == 400
     assert "P(paper, narration > paper, sparse) = 0.58" in text
     assert "reference uniform-paper (paper): 14.00" in text
+    # reach: training curves m·e at 100·(e+1) decisions, window 10, so each run's score is
+    # 0, m/2, m, 1.5m; narration's IQM (m = 2, 3) 0, 1.25, 2.5, 3.75, sparse's mean (m = 0, 2, 4)
+    # 0, 1, 2, 3: narration reaches 3 only at 400; sparse never reaches 3.75
+    assert [(r["x"], r["target"], r["decisions"], r["of"]) for r in record["reach"]] == \
+        [("paper, narration", 3.0, 400, 400)]
+    assert "paper, narration reaches paper, sparse's last training IQM (3.00) at 400 of 400 " \
+        "decisions (1.00)" in text
     # performance profiles: 101 thresholds from 0 to the best run's 4
     prof = record["profiles"]
     assert prof["tau"][0] == 0.0 and prof["tau"][-1] == 4.0 and len(prof["tau"]) == 101
@@ -160,6 +174,8 @@ def test_compare_groups_seeds_and_reports_hand_computed_figures(
                                "--reps", "100"], capsys)
     assert code == 0, err
     assert "P(paper, sparse > paper, narration) = 0.42" in text
+    assert "paper, sparse reaches paper, narration's last training IQM (3.75) nowhere in 400 " \
+        "decisions" in text
 
 
 def test_groups_are_told_apart_by_the_settings_that_differ(

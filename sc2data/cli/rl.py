@@ -43,6 +43,9 @@ def evaluate_cmd(
     run: Path = typer.Argument(..., help="Run folder of sc2data rl train."),
     episodes: int = typer.Option(10, "--episodes", help="Seeded episodes never used in training, "
                                                         "half with each start side."),
+    processes: Optional[int] = typer.Option(
+        None, "--processes", help="Worker processes the episodes are spread over (the figures "
+        "are the same) [default: one per core; 1 with the real game]."),
     progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",
                                             help="Progress bar [default: on a terminal]."),
 ) -> None:
@@ -51,7 +54,7 @@ def evaluate_cmd(
     from sc2data.rl.evaluate import evaluate, summary
 
     require_rl("sc2data rl evaluate")
-    typer.echo(summary(evaluate(run, episodes, progress)))
+    typer.echo(summary(evaluate(run, episodes, progress, processes)))
 
 
 @app.command("baselines")

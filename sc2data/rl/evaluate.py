@@ -18,6 +18,10 @@ episodes; ``actions`` the share of decisions each function (paper space) or macr
 ``+masked`` for a choice the masks did not allow — what an argmax policy that makes no marine
 plays instead. Scores are the game's own: marines made in the episode, whatever the training reward.
 
+The ``2 × episodes`` episodes are independent (each seeds its own sampling), so they are spread
+over ``processes`` worker processes (default: one per core, one thread each, with the simulator;
+one with the real game) and give the same figures however they are spread.
+
 Reference agents (:func:`baselines`, ``sc2data rl baselines --out DIR``) are played once on the
 same seeds and stored in ``DIR/baselines.json``: the masked uniform policy of each action space
 (uniform over the allowed functions, then over the screen; uniform over the feasible macros),
@@ -202,32 +206,34 @@ def action_shares(counts: Counter[str]) -> dict[str, float]:
     return {name: round(n / total, 4) for name, n in counts.most_common()}
 
 
-def evaluate(run: Path, episodes: int = 10, progress: bool | None = None) -> dict[str, Any]:
+def evaluate(run: Path, episodes: int = 10, progress: bool | None = None,
+             processes: int | None = None) -> dict[str, Any]:
     """Play the trained policy of ``run`` on the evaluation episodes, sampled then argmax, with
-    the action masks; writes and returns ``RUN/eval.json`` (see the module docstring)."""
+    the action masks, over ``processes`` worker processes (None: see the module docstring);
+    writes and returns ``RUN/eval.json`` (see the module docstring)."""
     require_rl("sc2data rl evaluate")
     if episodes < 1:
         raise Sc2DataError("--episodes must be at least 1")
+    if processes is not None and processes < 1:
+        raise Sc2DataError(f"--processes must be at least 1, got {processes}")
     cfg = load_config(run)
     state = _read_json(run / STATE, STATE_SHAPE) if (run / STATE).is_file() else {}
-    import torch
-
-    from sc2data.rl.envs import BuildMarinesGym
-
     seeds, sides = eval_seeds(episodes)
-    torch.set_num_threads(1)
-    env = BuildMarinesGym(cfg.action_space, backend=cfg.backend, obs=cfg.obs_config(),
-                          game_loops=game_loops(cfg))
-    try:
-        model = load_model(run, env)
-        counts: dict[str, Counter[str]] = {"sampled": Counter(), "argmax": Counter()}
-        with bar(2 * episodes, desc="rl evaluate", unit="episode", show=progress) as b:
-            sampled = _episodes(model, env, seeds, False, lambda: b.update(1), counts["sampled"])
-            argmax = _episodes(model, env, seeds, True, lambda: b.update(1), counts["argmax"])
-    finally:
-        env.close()
-    result = {"episodes": episodes, "seeds": seeds, "sides": sides, "sampled": scores(sampled),
-              "argmax": scores(argmax),
+    jobs = [(deterministic, seed) for deterministic in (False, True) for seed in seeds]
+    if processes is None:
+        from sc2data.rl.vector import default_processes
+
+        processes = default_processes(len(jobs)) if cfg.backend == "sim" else 1
+    with bar(len(jobs), desc="rl evaluate", unit="episode", show=progress) as b:
+        played = _play_jobs(run, jobs, min(processes, len(jobs)), lambda: b.update(1))
+    counts: dict[str, Counter[str]] = {"sampled": Counter(), "argmax": Counter()}
+    marines: dict[str, list[int]] = {"sampled": [], "argmax": []}
+    for (deterministic, _), (made, actions) in zip(jobs, played):
+        mode = "argmax" if deterministic else "sampled"
+        marines[mode].append(made)
+        counts[mode].update(actions)
+    result = {"episodes": episodes, "seeds": seeds, "sides": sides,
+              "sampled": scores(marines["sampled"]), "argmax": scores(marines["argmax"]),
               "actions": {mode: action_shares(c) for mode, c in counts.items()},
               "trained_timesteps": state.get("timesteps"),
               "trained_env_steps": state.get("env_steps"), "config": cfg.identity(),
@@ -235,6 +241,82 @@ def evaluate(run: Path, episodes: int = 10, progress: bool | None = None) -> dic
     with writing(str(run / EVAL), "free some space, then rerun the same command"):
         _write_json(run / EVAL, result)
     return result
+
+
+_PLAYER: tuple[str, Any, Any] | None = None
+"""This process's (run, model, env) for evaluation episodes, loaded once by
+:func:`_load_player`."""
+
+
+def _load_player(run: str) -> None:
+    """Load ``run``'s policy and a game for it into this process (once), torch on one
+    thread."""
+    global _PLAYER
+    if _PLAYER is not None and _PLAYER[0] == run:
+        return
+    _close_player()
+    import torch
+
+    from sc2data.rl.envs import BuildMarinesGym
+
+    torch.set_num_threads(1)
+    cfg = load_config(Path(run))
+    env = BuildMarinesGym(cfg.action_space, backend=cfg.backend, obs=cfg.obs_config(),
+                          game_loops=game_loops(cfg))
+    try:
+        _PLAYER = (run, load_model(Path(run), env), env)
+    except BaseException:
+        env.close()
+        raise
+
+
+def _close_player() -> None:
+    global _PLAYER
+    if _PLAYER is not None:
+        _PLAYER[2].close()
+        _PLAYER = None
+
+
+def _play_job(run: str, job: tuple[bool, int]) -> tuple[int, Counter[str]]:
+    """One evaluation episode of ``run``'s policy (argmax or not, its seed): the marines made
+    and the actions chosen. The player is loaded on a process's first job, not by a pool
+    initializer, so that an error loading it reaches the caller as itself."""
+    _load_player(run)
+    assert _PLAYER is not None
+    deterministic, seed = job
+    actions: Counter[str] = Counter()
+    (made,) = _episodes(_PLAYER[1], _PLAYER[2], [seed], deterministic, lambda: None, actions)
+    return made, actions
+
+
+def _play_jobs(run: Path, jobs: Sequence[tuple[bool, int]], processes: int,
+               tick: Callable[[], None]) -> list[tuple[int, Counter[str]]]:
+    """Every job's result, in order: in this process, or over ``processes`` worker processes
+    (spawned, as the vector env's are; a worker's error is raised here)."""
+    if processes <= 1:
+        try:
+            out = []
+            for job in jobs:
+                out.append(_play_job(str(run), job))
+                tick()
+            return out
+        finally:
+            _close_player()
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(processes, mp_context=mp.get_context("spawn")) as pool:
+        futures = [pool.submit(_play_job, str(run), job) for job in jobs]
+        try:
+            results = []
+            for f in futures:
+                results.append(f.result())
+                tick()
+            return results
+        except BaseException:
+            for f in futures:
+                f.cancel()
+            raise
 
 
 def read_eval(run: Path) -> dict[str, Any]:

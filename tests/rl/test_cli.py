@@ -59,6 +59,14 @@ def test_train_resume_evaluate_plot(tmp_path: Path, capsys: pytest.CaptureFixtur
     assert code == 0, err
     assert json.loads((run / "eval.json").read_text()) == result
     assert not (run / "eval-stochastic.json").exists()
+    # Spread over worker processes (the default here: one per core) or played in this one:
+    # the same figures.
+    code, out, err = run_cli(["rl", "evaluate", run, "--episodes", "2", "--processes", "1",
+                              "--no-progress"], capsys)
+    assert code == 0, err
+    assert json.loads((run / "eval.json").read_text()) == result
+    code, _, err = run_cli(["rl", "evaluate", run, "--processes", "0"], capsys)
+    assert_one_line_error(code, err, "--processes must be at least 1")
 
     png = tmp_path / "curves.png"
     code, out, err = run_cli(["rl", "plot", run, run, "--window", "1000", "--out", png], capsys)

@@ -185,10 +185,10 @@ class Recipe:
             del d["sources"]
         if self.pairs.mismatch != "confusable":  # likewise
             del d["pairs"]["confusable"], d["pairs"]["confusable_share"]
-        if not self.pairs.multi_match:  # likewise
-            del d["pairs"]["multi_match"]
         else:
             d["pairs"]["confusable"] = {k: list(v) for k, v in self.pairs.confusable.items()}
+        if not self.pairs.multi_match:  # likewise
+            del d["pairs"]["multi_match"]
         return d
 
 

@@ -271,6 +271,11 @@ def test_multi_match_adds_a_matched_pair_for_every_other_command_a_drawn_state_s
 
 def test_multi_match_is_recorded_only_when_set() -> None:
     assert "multi_match" not in three().to_dict()["pairs"]  # older recipes keep their identity
-    assert three({"multi_match": True}).to_dict()["pairs"]["multi_match"] is True
+    assert three({"multi_match": True}).to_dict()["pairs"] == {
+        "states_per_command": 60, "null_states": 5, "mismatch": "uniform", "multi_match": True}
+    hard = {"mismatch": "confusable", "confusable": {"build_scv": ["train_marine"]}}
+    assert three({**hard, "multi_match": True}).to_dict()["pairs"] == {
+        **three(hard).to_dict()["pairs"], "multi_match": True}
+    assert three(hard).to_dict()["pairs"]["confusable"] == {"build_scv": ["train_marine"]}
     with pytest.raises(Exception, match=r"multi_match must be bool"):
         three({"multi_match": "yes"})

@@ -50,6 +50,7 @@ from sc2data.rl.train import (
     STATE_SHAPE,
     _read_json,
     _write_json,
+    default_shaping,
     game_loops,
     load_config,
     read_config,
@@ -456,10 +457,13 @@ def reference_summary(record: dict[str, Any]) -> list[str]:
 
 def _label(cfg: dict[str, Any]) -> str:
     """``space, reward`` of a run's config, its narration file's name where not the default,
-    and ``potential`` where the shaping is potential-based."""
-    label = f"{cfg.get('action_space')}, {cfg.get('reward')}"
+    and its shaping where not the reward's default (:func:`~sc2data.rl.train.default_shaping`;
+    a config without one was event-shaped)."""
+    reward = str(cfg.get("reward"))
+    label = f"{cfg.get('action_space')}, {reward}"
     label += f" ({Path(cfg['narration']).stem})" if cfg.get("narration") else ""
-    return label + (f", {cfg['shaping']}" if cfg.get("shaping", "event") != "event" else "")
+    shaping = cfg.get("shaping", "event")
+    return label + (f", {shaping}" if shaping != default_shaping(reward) else "")
 
 
 def seed_band(curves: Sequence[tuple[np.ndarray, np.ndarray]]

@@ -54,6 +54,15 @@ def require_rl(purpose: str) -> None:
             raise MissingDependencyError(package, "rl", purpose) from None
 
 
+def default_shaping(reward: str) -> str:
+    """How ``reward`` pays its bonus unless told: ``potential`` for the rules reward, ``event``
+    for the others — what the experiment chose (BENCHMARKS.md, "Event or potential-based
+    shaping"): paid per firing, the rules' bonus is farmed (agents build depots, not marines,
+    below the uniform policy), as a potential it is not; the narration bonus did at least as
+    well per match."""
+    return "potential" if reward == "rules" else "event"
+
+
 @dataclass(frozen=True)
 class RLConfig:
     """Everything that defines a training run (``steps`` and ``progress`` may change on resume).
@@ -88,10 +97,12 @@ class RLConfig:
     """MEM distance below which a command is matched."""
     patience: int = 0
     """Skip a narration command not matched within this many decisions (0: never)."""
-    shaping: str = "event"
+    shaping: str | None = None
     """How rules/narration pay their bonus: event (each firing or match) or potential
-    (gamma*phi(s') - phi(s): cannot be farmed)."""
-    # potential: γ·Φ(s') − Φ(s) with the run's gamma (sc2data.rl.rewards).
+    (gamma*phi(s') - phi(s): cannot be farmed) [default: potential for rules, event
+    otherwise]."""
+    # potential: γ·Φ(s') − Φ(s) with the run's gamma (sc2data.rl.rewards); the defaults are
+    # the experiment's choice (default_shaping).
     episode_steps: int | None = None
     """pysc2 steps per episode on the simulator [default: 1800]."""
     rollout: int = 64
@@ -167,6 +178,8 @@ class RLConfig:
     def __post_init__(self) -> None:
         if self.target_kl == 0:  # 0: never stop early, as None
             object.__setattr__(self, "target_kl", None)
+        if self.shaping is None:
+            object.__setattr__(self, "shaping", default_shaping(self.reward))
 
     def obs_config(self) -> Any:
         from sc2data.rl.obs import ObsConfig

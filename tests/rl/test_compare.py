@@ -183,12 +183,16 @@ def test_groups_are_told_apart_by_the_settings_that_differ(
     a = fake_run(tmp_path / "a", [1, 1], action_space="paper", reward="rules", bonus=0.1)
     b = fake_run(tmp_path / "b", [2, 2], action_space="paper", reward="rules", bonus=0.5)
     c = fake_run(tmp_path / "c", [2, 2], action_space="paper", reward="rules", bonus=0.5,
-                 shaping="potential")
-    code, text, err = run_cli(["rl", "compare", a, b, c, "--reps", "50"], capsys)
+                 shaping="event")
+    d = fake_run(tmp_path / "d", [2, 2], action_space="paper", reward="narration",
+                 mem="/unused", shaping="potential")
+    code, text, err = run_cli(["rl", "compare", a, b, c, d, "--reps", "50"], capsys)
     assert code == 0, err
     assert "paper, rules [bonus=0.1]: 1 run" in text
     assert "paper, rules [bonus=0.5]: 1 run" in text
-    assert "paper, rules, potential: 1 run" in text  # its name is its own: nothing added
+    # a shaping other than its reward's default is named (its name is its own: nothing added)
+    assert "paper, rules, event: 1 run" in text
+    assert "paper, narration, potential: 1 run" in text
 
 
 def test_groups_of_other_inputs_name_the_digests_that_differ(
@@ -249,3 +253,13 @@ def test_runs_written_before_shaping_read_as_event_shaping(tmp_path: Path) -> No
     del config["shaping"]
     _write_json(run / "config.json", config)
     assert load_config(run).shaping == "event"
+
+
+def test_shaping_defaults_to_the_experiments_choice_per_reward(tmp_path: Path) -> None:
+    """Potential-based for the rules reward (paid per firing it was farmed), per match for
+    the narration's; what is asked is kept, and a config records the shaping it ran."""
+    assert RLConfig(out="r", reward="rules").shaping == "potential"
+    assert RLConfig(out="r", reward="narration").shaping == "event"
+    assert RLConfig(out="r").shaping == "event"  # sparse: no bonus to pay
+    assert RLConfig(out="r", reward="rules", shaping="event").shaping == "event"
+    assert RLConfig(out="r", reward="rules").identity()["shaping"] == "potential"

@@ -201,6 +201,11 @@ def group_runs(runs: Sequence[RunScores]) -> dict[str, list[RunScores]]:
     return groups
 
 
+def final_tables(groups: dict[str, list[RunScores]], mode: str) -> dict[str, np.ndarray]:
+    """Per group, its runs' final scores in ``mode`` as a (runs, 1 task) table."""
+    return {g: np.array([[r.final[mode]] for r in members]) for g, members in groups.items()}
+
+
 def _flat(config: dict[str, Any]) -> dict[str, Any]:
     """A run's settings with nested ones (``inputs``: the digests of what the reward reads)
     under dotted keys, so a label names only the entries that differ."""
@@ -272,7 +277,7 @@ def compare(runs: Sequence[Path], out: Path | None = None, *, baselines: Path | 
                               "episodes": len(loaded[0].seeds), "reps": reps,
                               "confidence": CONFIDENCE, "groups": {}, "improvement": []}
     for mode in MODES:
-        tables = {g: np.array([[r.final[mode]] for r in members]) for g, members in groups.items()}
+        tables = final_tables(groups, mode)
         for g, (point, lo, hi) in iqm_intervals(tables, reps, seed).items():
             entry = record["groups"].setdefault(g, {
                 "runs": [str(r.run) for r in groups[g]],
@@ -284,8 +289,7 @@ def compare(runs: Sequence[Path], out: Path | None = None, *, baselines: Path | 
     pairs = [(x, against) for x in names if x != against] if against is not None else \
         [(x, y) for i, x in enumerate(names) for y in names[i + 1:]]
     if pairs:
-        tables = {g: np.array([[r.final["sampled"]] for r in members])
-                  for g, members in groups.items()}
+        tables = final_tables(groups, "sampled")
         found = improvement_intervals({f"{x} > {y}": (tables[x], tables[y]) for x, y in pairs},
                                       reps, seed)
         record["improvement"] = [{"x": x, "y": y, "mode": "sampled", "p": found[f"{x} > {y}"][0],
@@ -351,8 +355,7 @@ def _curves(groups: dict[str, list[RunScores]], points: int, window: int, reps: 
 
 def _profiles(groups: dict[str, list[RunScores]], reps: int, seed: int) -> dict[str, Any]:
     """Performance profiles of the final sampled scores (see the module docstring)."""
-    tables = {g: np.array([[r.final["sampled"]] for r in members])
-              for g, members in groups.items()}
+    tables = final_tables(groups, "sampled")
     top = max(float(t.max()) for t in tables.values())
     taus = np.linspace(0.0, max(top, 1.0), PROFILE_POINTS)
     point, interval = profile_intervals(tables, taus, reps, seed)

@@ -23,6 +23,12 @@ step (:func:`by_action`: the pysc2 function, or the macro): a rule reads two fra
 always tell what the step did (``collect_minerals`` fires when an idle SCV is sent to build as
 well as to mine).
 
+On the simulator, both judges are also held to the game's own record (:mod:`sc2data.labels.truth`:
+the event that *is* each built-in command, e.g. an idle SCV ordered to mine for "collect
+minerals"): per command, the rule's and the MEM's precision and recall against what happened in
+the step (``sim`` in the JSON). Agreement with the rules says whether the MEM learnt the rules;
+this says whether either pays for the thing the command names, on the policy's own play.
+
 The two rewards, judged as the field judges a learnt reward (Gleave et al. 2021, *Quantifying
 differences in reward functions*): a stack's **rules reward** is the number of rules that fire
 on it (``--reward rules`` pays ``bonus`` times that), its **narration reward** the number of
@@ -151,7 +157,9 @@ def agreement(run: Path, mem: Path, *, episodes: int = 3, deterministic: bool = 
     if seen.drawn:
         s, s2 = (np.array(x) for x in zip(*seen.drawn))
         epic = epic_distance(both, s, s2, np.array(seen.support), cfg.gamma)
-    result = _result(judge, fired, matched, epic=epic, seen=seen, cfg=cfg,
+    happened = (np.concatenate(seen.happened) if seen.happened and cfg.backend == "sim"
+                else None)
+    result = _result(judge, fired, matched, epic=epic, seen=seen, cfg=cfg, happened=happened,
                      head={"run": str(run), "mem": str(mem), "episodes": episodes,
                            "seeds": [AGREEMENT_SEED + e for e in range(episodes)],
                            "deterministic": deterministic, "threshold": judge.limit})
@@ -221,11 +229,15 @@ class _Seen:
     marines: list[int] = field(default_factory=list)
     actions: list[str] = field(default_factory=list)
     """What the policy chose (``info["action"]``) in the decision each judged stack belongs to."""
+    happened: list[np.ndarray] = field(default_factory=list)
+    """Per episode, ``(stacks, commands)``: the simulator's record of each command in the step
+    (:func:`sc2data.labels.truth.truth`)."""
 
 
 def _play(run: Path, cfg: Any, judge: _Judge, *, episodes: int, deterministic: bool) -> _Seen:
     """Play the policy's episodes, judge every stack, and draw each episode's share of the EPIC
     sample."""
+    from sc2data.labels.truth import truth
     from sc2data.rl.envs import BuildMarinesGym
     from sc2data.rl.train import play
 
@@ -243,10 +255,12 @@ def _play(run: Path, cfg: Any, judge: _Judge, *, episodes: int, deterministic: b
         for e in range(episodes):
             rule_frames: list[Any] = []
             mem_frames: list[Any] = []
+            happened: list[np.ndarray] = []
             for info in play(model, env, AGREEMENT_SEED + e, deterministic):  # noqa: B007
                 new = env.frames if not rule_frames else env.frames[1:]
                 rule_frames += [judge.rule_schema.extract(f) for f in new]
                 mem_frames += [judge.scorer.schema.extract(f) for f in new]
+                happened += [truth(events, judge.ids) for events in env.events]
                 seen.actions += [str(info["action"])] * (len(env.frames) - 1)
             seen.marines.append(int(info["marines"]))
             steps = np.arange(len(rule_frames) - 1)
@@ -255,6 +269,7 @@ def _play(run: Path, cfg: Any, judge: _Judge, *, episodes: int, deterministic: b
             fired, matched = judge(rule_frames, mem_frames, steps, steps + 1)
             seen.fired.append(fired)
             seen.matched.append(matched)
+            seen.happened.append(np.array(happened, bool).reshape(len(steps), len(judge.ids)))
             _sample(seen, rule_frames, mem_frames, steps, pick=pick, episodes=episodes)
     finally:
         env.close()
@@ -313,9 +328,26 @@ def by_action(fired: np.ndarray, matched: np.ndarray, actions: np.ndarray
             for j in order}
 
 
+def against_record(fired: np.ndarray, matched: np.ndarray, happened: np.ndarray
+                   ) -> dict[str, Any]:
+    """One command's columns held to the game's record (``happened``): how often it happened,
+    and the rule's and the MEM's precision and recall against it."""
+    def pr(said: np.ndarray) -> tuple[float | None, float | None]:
+        hit = int((said & happened).sum())
+        return _ratio(hit, int(said.sum())), _ratio(hit, int(happened.sum()))
+
+    (rp, rr), (mp, mr) = pr(fired), pr(matched)
+    return {"happened": int(happened.sum()), "rule_precision": rp, "rule_recall": rr,
+            "mem_precision": mp, "mem_recall": mr}
+
+
 def _result(judge: _Judge, fired: np.ndarray, matched: np.ndarray, *, epic: float | None,
-            seen: _Seen, cfg: Any, head: dict[str, Any]) -> dict[str, Any]:
-    """``agreement.json``: ``head``, then per command and over all stacks."""
+            seen: _Seen, cfg: Any, happened: np.ndarray | None, head: dict[str, Any]
+            ) -> dict[str, Any]:
+    """``agreement.json``: ``head``, then per command and over all stacks. ``happened``: the
+    simulator's record per stack and command (None on the real game)."""
+    from sc2data.labels.truth import EVENT_OF
+
     tp, fp, fn = ((fired & matched).sum(0), (~fired & matched).sum(0),
                   (fired & ~matched).sum(0))
     none = ~fired.any(1)
@@ -329,7 +361,9 @@ def _result(judge: _Judge, fired: np.ndarray, matched: np.ndarray, *, epic: floa
                "f1": _f1(int(tp[k]), int(fp[k]), int(fn[k])),
                "fired_alone": int(n_alone[k]), "recall_alone": r_alone[k],
                "by_action": by_action(fired[:, k], matched[:, k], actions),
-               "pearson": pearson(fired[:, k], matched[:, k]), "false_matches": confused[i]}
+               "pearson": pearson(fired[:, k], matched[:, k]), "false_matches": confused[i],
+               "sim": (against_record(fired[:, k], matched[:, k], happened[:, k])
+                       if happened is not None and i in EVENT_OF else None)}
            for k, (i, t) in enumerate(zip(judge.ids, judge.texts))}
     return {**head, "stacks": int(len(fired)),
             "marines": seen.marines, "commands": per, "null_stacks": int(none.sum()),
@@ -342,8 +376,9 @@ def _result(judge: _Judge, fired: np.ndarray, matched: np.ndarray, *, epic: floa
 
 def summary(result: dict[str, Any]) -> list[str]:
     """A small table: per command, rule firings, MEM matches, precision, recall, F1 and recall
-    where its rule was the only one to fire; what the false matches were; then
-    the two rewards' correlation and EPIC distance."""
+    where its rule was the only one to fire; what the false matches were; on the simulator, the
+    rule and the MEM against the game's record; then the two rewards' correlation and EPIC
+    distance."""
     def pct(x: float | None) -> str:
         return "—" if x is None else f"{100 * x:.1f}%"
 
@@ -363,6 +398,14 @@ def summary(result: dict[str, Any]) -> list[str]:
             lines.append(f"{cid} matched where instead: " + ", ".join(
                 f"{other} fired {n:,}" if other != "null" else f"no rule fired {n:,}"
                 for other, n in c["false_matches"].items()))
+    record = {cid: c["sim"] for cid, c in result["commands"].items() if c.get("sim")}
+    if record:
+        lines.append(f"{'against the game':<20} {'happened':>10} {'rule P':>9} {'rule R':>7} "
+                     f"{'MEM P':>7} {'MEM R':>7}")
+        for cid, r in record.items():
+            lines.append(f"{cid:<20} {r['happened']:>10,} {pct(r['rule_precision']):>9} "
+                         f"{pct(r['rule_recall']):>7} {pct(r['mem_precision']):>7} "
+                         f"{pct(r['mem_recall']):>7}")
     lines.append(f"null stacks (no rule fires): {result['null_stacks']:,}, matched to no "
                  f"command by the MEM: {pct(result['null_unmatched'])}")
     r = result.get("reward")

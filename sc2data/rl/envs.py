@@ -44,7 +44,8 @@ layers by default) in the stored dtypes, plus its non-spatial vectors (``player`
 ``score_cumulative``, ``game_loop``) — exactly what ``Schema.extract`` stores for a frame;
 ``obs="compact"`` the one-hot encoding made for a small CNN. The raw pysc2 observations of the
 last decision are kept in :attr:`BuildMarinesGym.frames` for the reward wrappers (never put in
-``info``). ``draw`` (feature layer keys) makes the simulator draw only those and what the
+``info``), and on the simulator what happened in each of its pysc2 steps in
+:attr:`BuildMarinesGym.events` (for judging rewards against the game's record). ``draw`` (feature layer keys) makes the simulator draw only those and what the
 observation and the masks read, the rest left 0: for a caller who knows what it reads (the
 vector env, :mod:`sc2data.rl.vector`).
 
@@ -165,6 +166,9 @@ class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
         self._expander = ReducedRandomAgent(0)
         self.frames: list[Any] = []
         """pysc2 observations of the last decision: the one before it, then one per pysc2 step."""
+        self.events: list[tuple[Any, ...]] = []
+        """On the simulator, what happened in each pysc2 step of the last decision (its
+        ``events``, one tuple per step, aligned with ``frames[1:]``); empty tuples elsewhere."""
 
     # -- gymnasium API ---------------------------------------------------------------------------
 
@@ -181,6 +185,7 @@ class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
         self._ts = self._env.reset()[0]
         self._view = ScreenView(self._ts)
         self.frames = [self._ts.observation]
+        self.events = []
         return self._obs(), {"game_reward": 0.0, "env_steps": 0, "game_loop": self._loop(),
                              "marines": self._marines()}
 
@@ -188,6 +193,7 @@ class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
         if self._ts is None:
             raise RuntimeError("call reset() before step()")
         self.frames = [self._ts.observation]
+        self.events = []
         reward = 0.0
         invalid = not self._allowed(action)
         if self.kind == "paper":
@@ -232,6 +238,7 @@ class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
         self._ts = self._env.step([call])[0]
         self._view = ScreenView(self._ts)
         self.frames.append(self._ts.observation)
+        self.events.append(tuple(getattr(self._env, "events", ())))
         return float(self._ts.reward or 0.0)
 
     def _play_macro(self, name: str) -> float:

@@ -10,7 +10,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import sc2data.rl  # noqa: F401  (registers the ids)
-from sc2data._pysc2 import actions
+from sc2data._pysc2 import actions, units
 from sc2data.ground.errors import Sc2DataError
 from sc2data.rl.envs import MACROS, PAPER_FUNCTIONS, BuildMarinesGym, paper_call
 from sc2data.schema import Schema
@@ -60,6 +60,22 @@ def test_masked_random_actions_never_send_an_invalid_call(space: str) -> None:
         assert 1 <= info["env_steps"] <= 62
         assert not terminated
     assert len(used) >= 5, used
+
+
+def test_events_follow_the_pysc2_steps_of_a_decision() -> None:
+    """``env.events`` holds one entry per pysc2 step of the decision (``frames[1:]``), and
+    every SCV the game completed shows up there once: the SCV count rises by the completions."""
+    env = BuildMarinesGym("macro", game_loops=8 * 1500)
+    env.reset(seed=3)
+    rng = np.random.default_rng(1)
+    completed = 0
+    for _ in range(200):
+        env.step(_random_masked(env, rng))
+        assert len(env.events) == len(env.frames) - 1
+        completed += sum(e.kind == "completed" and e.unit_type == units.Terran.SCV
+                         for step in env.events for e in step)
+    workers = int(env.frames[-1]["player"][6])  # food_workers
+    assert completed > 0 and workers == 12 + completed
 
 
 def test_unmasked_invalid_action_plays_no_op() -> None:

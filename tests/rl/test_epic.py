@@ -97,7 +97,11 @@ def test_agreement_reports_f1_and_the_rewards_correlation_and_epic(
         assert sum(v["fired"] for v in by.values()) == c["rule_fired"]
         assert sum(v["matched"] for v in by.values()) == c["tp"]
         assert set(by) <= set(MACROS)
-    assert "recall, only rule" in text
+        sim = c["sim"]  # on the simulator: both judges against the game's record
+        assert 0 <= sim["happened"] <= result["stacks"]
+        for key in ("rule_precision", "rule_recall", "mem_precision", "mem_recall"):
+            assert sim[key] is None or 0.0 <= sim[key] <= 1.0
+    assert "recall, only rule" in text and "against the game" in text
 
 
 def test_false_matches_by_hand() -> None:
@@ -125,6 +129,20 @@ def test_recall_where_only_its_rule_fired_by_hand() -> None:
     n, recall = recall_alone(fired, matched)
     assert n.tolist() == [2, 1, 0]
     assert recall == [0.5, 0.0, None]
+
+
+def test_judges_against_the_games_record_by_hand() -> None:
+    """Happened on stacks 0 and 1; the rule fired on 0 and 2, the MEM matched 0, 1 and 3."""
+    from sc2data.rl.agreement import against_record
+
+    happened = np.array([1, 1, 0, 0], bool)
+    fired = np.array([1, 0, 1, 0], bool)
+    matched = np.array([1, 1, 0, 1], bool)
+    assert against_record(fired, matched, happened) == {
+        "happened": 2, "rule_precision": 0.5, "rule_recall": 0.5,
+        "mem_precision": 2 / 3, "mem_recall": 1.0}
+    none = against_record(fired, matched, np.zeros(4, bool))
+    assert none["rule_recall"] is None and none["rule_precision"] == 0.0
 
 
 def test_firings_by_the_action_of_their_step_by_hand() -> None:

@@ -2,14 +2,12 @@
 
 Episodes are rolled out with the reduced random and the scripted agents straight through
 ``make_env``/``make_agent``; each step's two observations go through ``Schema.extract`` into a
-stack, exactly as the real game's would. Per rule and step, the truth is:
-
-* build_scv — an SCV ``completed``;  train_marine — a Marine ``completed``;
-* build_supply_depot / build_barracks — a SupplyDepot / Barracks ``placed``;
-* collect_minerals — ``gathered`` (an idle SCV sent to mine). A two-frame stack cannot see a step
-  where one SCV goes idle (its building done) as another is sent to mine: the idle count stays
-  level. So its recall of ≥ 99% is held on the steps where no SCV went idle, and its raw recall is
-  printed and held to a floor (rules/collect_minerals.py).
+stack, exactly as the real game's would. Per rule and step, the truth is the simulator's event
+that is the rule's command (``sc2data.labels.truth``: a SupplyDepot ``placed``, an SCV
+``completed``, …; collect_minerals — ``gathered``, an idle SCV sent to mine). A two-frame stack
+cannot see a step where one SCV goes idle (its building done) as another is sent to mine: the idle
+count stays level. So its recall of ≥ 99% is held on the steps where no SCV went idle, and its
+raw recall is printed and held to a floor (rules/collect_minerals.py).
 """
 
 from __future__ import annotations
@@ -20,14 +18,13 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from sc2data._pysc2 import units
 from sc2data.game.agents import make_agent
 from sc2data.game.env import make_env
 from sc2data.labels.registry import load_registry
+from sc2data.labels.truth import truth
 from sc2data.rulebase import stack
 from sc2data.schema import Schema
 
-T = units.Terran
 EPISODES = (("reduced-random", 0), ("reduced-random", 1), ("reduced-random", 2),
             ("scripted", 0), ("scripted", 1))
 BUILTIN = ("build_scv", "collect_minerals", "build_supply_depot", "build_barracks",
@@ -52,16 +49,10 @@ def rollout(agent_name: str, seed: int) -> Iterator[tuple[dict, dict, dict[str, 
         idle_before = {u.tag for u in env.game.idle_workers}
         ts = env.step([agent.step(ts)])[0]
         cur = extract(ts.observation)
-        seen = collections.Counter((e.kind, e.unit_type) for e in env.events)
         idle_after = {u.tag for u in env.game.idle_workers}
-        yield prev, cur, {
-            "build_scv": seen["completed", T.SCV] > 0,
-            "train_marine": seen["completed", T.Marine] > 0,
-            "build_supply_depot": seen["placed", T.SupplyDepot] > 0,
-            "build_barracks": seen["placed", T.Barracks] > 0,
-            "collect_minerals": seen["gathered", T.SCV] > 0,
-            "_went_idle": bool(idle_after - idle_before),
-        }
+        happened = truth(env.events, BUILTIN)
+        yield prev, cur, {**dict(zip(BUILTIN, happened.tolist())),
+                          "_went_idle": bool(idle_after - idle_before)}
         prev = cur
 
 

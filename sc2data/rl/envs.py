@@ -45,8 +45,9 @@ layers by default) in the stored dtypes, plus its non-spatial vectors (``player`
 ``obs="compact"`` the one-hot encoding made for a small CNN. The raw pysc2 observations of the
 last decision are kept in :attr:`BuildMarinesGym.frames` for the reward wrappers (never put in
 ``info``), and on the simulator what happened in each of its pysc2 steps in
-:attr:`BuildMarinesGym.events` (for judging rewards against the game's record). ``draw`` (feature layer keys) makes the simulator draw only those and what the
-observation and the masks read, the rest left 0: for a caller who knows what it reads (the
+:attr:`BuildMarinesGym.events` (for judging rewards against the game's record). ``draw``
+(feature layer keys) makes the simulator draw only those and what the observation and the
+masks read, the rest left 0: for a caller who knows what it reads (the
 vector env, :mod:`sc2data.rl.vector`).
 
 Seeding: ``reset(seed=s)`` seeds gymnasium's ``np_random``; each episode then draws the

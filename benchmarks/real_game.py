@@ -50,6 +50,8 @@ that reaches back before them measures the walk out, not the income."""
 REAL_MINUTE = 1344
 """Game loops per real minute at "Faster" (22.4 loops a second)."""
 WORKERS = range(12, 21)
+NEVER = 1 << 30
+"""A game loop no replay reaches (a structure that never died, a phase that never ended)."""
 REAL_MEDIANS: dict[int, int] = {12: 713, 13: 727, 14: 728, 15: 756, 16: 811, 17: 840, 18: 882,
                                 19: 896, 20: 937}
 """Median mineral income per real minute by worker count, one base, no gas, 32 LotV replays."""
@@ -123,13 +125,14 @@ def _read_replay(replay: Any, out: Figures) -> None:
     started: dict[int, tuple[int, int, str]] = {}
     depots: dict[int, set[int]] = collections.defaultdict(set)
     halls: dict[int, set[int]] = collections.defaultdict(set)
+    died_at: dict[int, int] = {}
     births: dict[tuple[int, str], list[int]] = collections.defaultdict(list)
     barracks: dict[int, list[int]] = collections.defaultdict(list)
     changed: dict[int, int] = {}
     done_at: dict[int, int] = {}
 
     def end_one_base(pid: int, loop: int) -> None:
-        one_base_until[pid] = min(one_base_until.get(pid, 1 << 30), loop)
+        one_base_until[pid] = min(one_base_until.get(pid, NEVER), loop)
 
     for e in replay.tracker_events:
         if isinstance(e, UnitBornEvent):
@@ -162,9 +165,7 @@ def _read_replay(replay: Any, out: Figures) -> None:
         elif isinstance(e, UnitTypeChangeEvent) and e.unit_type_name == "OrbitalCommand":
             changed[e.unit_id] = e.frame
         elif isinstance(e, UnitDiedEvent):
-            for group in (depots, halls):
-                for ids in group.values():
-                    ids.discard(e.unit_id)
+            died_at[e.unit_id] = e.frame
 
     commands: dict[tuple[int, str], list[int]] = collections.defaultdict(list)
     orbital: dict[int, int] = {}
@@ -184,11 +185,11 @@ def _read_replay(replay: Any, out: Figures) -> None:
             continue
         # SCVs from the first CC while it is the only producer; marines from the first barracks
         # while it is the only one and has no add-on (a reactor trains two at once).
-        scv_until = min(orbital.get(pid, 1 << 30), one_base_until.get(pid, 1 << 30))
+        scv_until = min(orbital.get(pid, NEVER), one_base_until.get(pid, NEVER))
         _production(commands[(pid, "SCV")], births[(pid, "SCV")], scv_until, "SCV", out)
         rax = sorted(barracks[pid], key=abs)
         if rax and rax[0] > 0:
-            until = abs(rax[1]) if len(rax) > 1 else 1 << 30
+            until = abs(rax[1]) if len(rax) > 1 else NEVER
             _production([c for c in commands[(pid, "Marine")] if c >= rax[0]],
                         births[(pid, "Marine")], until, "marine", out)
 
@@ -199,13 +200,15 @@ def _read_replay(replay: Any, out: Figures) -> None:
         pid, loop, n = e.pid, e.frame, e.workers_active_count
         if loop <= 1:
             out.start.append((e.minerals_current, n, int(e.food_used), int(e.food_made)))
-        if races.get(pid) == "Terran" and 1 < loop <= one_base_until.get(pid, 1 << 30):
-            cc = sum(1 for u in halls[pid] if done_at.get(u, 0) < loop)  # stats come first
-            dep = sum(1 for u in depots[pid] if done_at[u] < loop)
+        if races.get(pid) == "Terran" and 1 < loop <= one_base_until.get(pid, NEVER):
+            # Stats come first in a loop; a structure counts from when it was done until it died
+            # (a set emptied of the dead as the pass goes would miss them in earlier samples).
+            cc = sum(1 for u in halls[pid] if done_at.get(u, 0) < loop <= died_at.get(u, NEVER))
+            dep = sum(1 for u in depots[pid] if done_at[u] < loop <= died_at.get(u, NEVER))
             out.supply_checks.append(int(e.food_made) == min(200, 15 * cc + 8 * dep))
         previous = last_workers.get(pid)
         last_workers[pid] = n
-        if (loop < FIRST_WINDOW + WINDOW or loop > one_base_until.get(pid, 1 << 30) or previous != n
+        if (loop < FIRST_WINDOW + WINDOW or loop > one_base_until.get(pid, NEVER) or previous != n
                 or e.vespene_collection_rate
                 or any(loop - WINDOW < b <= loop for b in worker_births[pid])):
             continue
@@ -320,9 +323,9 @@ def simulate(seeds: Iterable[int], agent: str = "opening", loops: int = 8000) ->
                     m == n for _, m in counts):
                 out.income[n].append(int(obs.score_cumulative.collection_rate_minerals))
         rax = [t for t in queued if t != g.cc.tag]
-        _production(queued.get(g.cc.tag, []), born[md.SCV], 1 << 30, "SCV", out)
+        _production(queued.get(g.cc.tag, []), born[md.SCV], NEVER, "SCV", out)
         if len(rax) == 1:  # marines matched to their one barracks
-            _production(queued[rax[0]], born[md.MARINE], 1 << 30, "marine", out)
+            _production(queued[rax[0]], born[md.MARINE], NEVER, "marine", out)
     return out
 
 

@@ -41,6 +41,13 @@ def opening() -> object:
     return rg.simulate(range(2), "opening", loops=6000)
 
 
+def test_structures_lost_later_still_count_for_supply_before() -> None:
+    """In this TvP the first depots die late in the game; food_made before must count them (the
+    check once used the structures alive at the replay's end: 4 of its 9 samples failed)."""
+    tvp = rg.read_replays([ROOT / "benchmarks" / "real-replays" / "3.2-dusk-towers-TvP.SC2Replay"])
+    assert len(tvp.supply_checks) == 9 and all(tvp.supply_checks)
+
+
 def test_the_replay_reads_as_the_real_game(real: object) -> None:
     for key in ("depot build", "barracks build", "SCV from idle", "SCV back to back",
                 "marine from idle"):

@@ -82,6 +82,11 @@ class TrainConfig:
     """Adam learning rate (paper: 5e-4)."""
     l2: float = 2.5e-3
     """λ of the weight penalty λ‖θ‖² (paper: 2.5e-3); see the module docstring for θ."""
+    mismatch_distance: float = 1.0
+    """The distance mismatched and null pairs are trained to (paper: 1; matched pairs: 0). A
+    state two commands both describe can be within the threshold (0.5) of both texts only if
+    they lie within 1.0 of each other, and 1 puts every two texts ≈ 1 apart; below 1 leaves them
+    room (recipes' ``multi_match``). Must stay above the threshold."""
     seed: int = 0
     """Seeds Python, numpy, torch and the loader's block order."""
     device: str = "auto"
@@ -128,6 +133,9 @@ class TrainConfig:
             raise Sc2DataError(f"--lr must be a positive number, not {self.lr}")
         if not (math.isfinite(self.l2) and self.l2 >= 0):
             raise Sc2DataError(f"--l2 must be zero or a positive number, not {self.l2}")
+        if not (math.isfinite(self.mismatch_distance) and 0.5 < self.mismatch_distance <= 1.0):
+            raise Sc2DataError(f"--mismatch-distance must be above the threshold 0.5 and at most "
+                               f"1, not {self.mismatch_distance}")
         if self.threads is not None and self.threads < 1:
             raise Sc2DataError(f"--threads must be at least 1, not {self.threads}")
         if self.epochs > 100_000:
@@ -318,6 +326,9 @@ class _Trainer:
         if cuda:  # packing runs on the GPU
             x = model.state.pack_torch(x)
         target = torch.from_numpy(batch.target).to(device, non_blocking=cuda)
+        far = target >= 0.5  # a mismatched or null pair (the pair set's targets are 0 or 1)
+        if cfg.mismatch_distance != 1.0:
+            target = torch.where(far, cfg.mismatch_distance, target)
         which = torch.from_numpy(batch.text).to(device, non_blocking=cuda)
         with torch.autocast(device.type, dtype=torch.bfloat16, enabled=cfg.amp and cuda):
             d = model(x, self.text_t, which).float()
@@ -327,7 +338,7 @@ class _Trainer:
             self.optimizer.zero_grad(set_to_none=True)
             loss.backward()
             self.optimizer.step()
-        correct = ((d < M.THRESHOLD) == (target < 0.5)).sum()
+        correct = ((d < M.THRESHOLD) == ~far).sum()
         return torch.stack([mse.detach() * len(batch), correct.float(),
                             torch.tensor(float(len(batch)), device=device)])
 

@@ -203,6 +203,7 @@ def test_cli_bad_data_is_a_one_line_error(what: str, needles: list[str], data: P
 @pytest.mark.parametrize("option, needles", [
     (["--vectors", "/no/such/vectors.bin"], ["/no/such/vectors.bin", "does not exist"]),
     (["--categorical", "pixels"], ["--categorical", "embed, onehot or scalar"]),
+    (["--mismatch-distance", "0.5"], ["--mismatch-distance", "above the threshold 0.5"]),
     pytest.param(["--device", "cuda"], ["--device cuda", "no CUDA GPU"],
                  marks=pytest.mark.skipif("__import__('torch').cuda.is_available()")),
 ])
@@ -401,3 +402,28 @@ def test_cli_init_that_does_not_fit_is_a_one_line_error(what: str, needles: list
                             *(["--pool", "1"] if what == "pool" else [])], capsys)
     assert_one_line_error(code, err, *needles)
     assert not (tmp_path / "run").exists()
+
+
+def test_mismatch_distance_is_what_mismatched_pairs_are_trained_to(data: Path,
+                                                                    tmp_path: Path) -> None:
+    """Trained to 0.7 instead of the paper's 1, mismatched pairs end nearer their texts, and the
+    commands' texts nearer each other (the room a state two commands describe needs); the
+    accuracy still counts a pair as matched below the threshold 0.5."""
+    from sc2data.model.scorer import load_model
+
+    def spread(run: Path) -> tuple[float, float]:
+        report = evaluate(run, device="cpu")
+        scorer = load_model(run)
+        texts = PairSet(data).texts()
+        e = scorer.embed_texts([texts[k] for k in sorted(texts)])
+        d = np.linalg.norm(e[:, None] - e[None], axis=-1)
+        far = report["splits"]["train"]["per_kind"]
+        return float(d[np.triu_indices(len(e), 1)].mean()), far["mismatched"]["accuracy"]
+
+    paper = spread(train_tiny(data, tmp_path / "d1", epochs=6, lr=2e-3))
+    near = spread(train_tiny(data, tmp_path / "d07", epochs=6, lr=2e-3, mismatch_distance=0.7))
+    print("texts apart, mismatched accuracy: 1.0 ->", paper, "0.7 ->", near)
+    assert near[0] < 0.9 * paper[0]
+    assert near[1] > 0.6  # still mostly beyond the threshold
+    config = json.loads((tmp_path / "d07" / "config.json").read_text())
+    assert config["mismatch_distance"] == 0.7

@@ -406,9 +406,9 @@ def test_cli_init_that_does_not_fit_is_a_one_line_error(what: str, needles: list
 
 def test_mismatch_distance_is_what_mismatched_pairs_are_trained_to(data: Path,
                                                                     tmp_path: Path) -> None:
-    """Trained to 0.7 instead of the paper's 1, mismatched pairs end nearer their texts, and the
-    commands' texts nearer each other (the room a state two commands describe needs); the
-    accuracy still counts a pair as matched below the threshold 0.5."""
+    """Mismatched pairs trained to 0.7 instead of the paper's 1 leave the commands' texts nearer
+    each other (the room a state two commands describe needs), while most mismatched pairs stay
+    beyond the threshold 0.5; the run records the setting."""
     from sc2data.model.scorer import load_model
 
     def spread(run: Path) -> tuple[float, float]:

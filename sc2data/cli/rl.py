@@ -134,8 +134,9 @@ def agreement_cmd(
 ) -> None:
     """On the states a trained policy visits: per command, how often the MEM's match agrees
     with the labelling rule (precision, recall and F1, the rule as ground truth; recall also
-    where the rule was the only one to fire); and the narration and rules rewards' Pearson
-    correlation and EPIC distance."""
+    where the rule was the only one to fire); on the simulator, the rule and the MEM against
+    the game's own record; and the narration and rules rewards' Pearson correlation and EPIC
+    distance."""
     from sc2data.rl.agreement import agreement, summary
 
     require_rl("sc2data rl agreement")

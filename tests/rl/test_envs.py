@@ -10,7 +10,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import sc2data.rl  # noqa: F401  (registers the ids)
-from sc2data._pysc2 import actions, units
+from sc2data._pysc2 import actions, features, units
 from sc2data.ground.errors import Sc2DataError
 from sc2data.rl.envs import MACROS, PAPER_FUNCTIONS, BuildMarinesGym, paper_call
 from sc2data.schema import Schema
@@ -74,7 +74,7 @@ def test_events_follow_the_pysc2_steps_of_a_decision() -> None:
         assert len(env.events) == len(env.frames) - 1
         completed += sum(e.kind == "completed" and e.unit_type == units.Terran.SCV
                          for step in env.events for e in step)
-    workers = int(env.frames[-1]["player"][6])  # food_workers
+    workers = int(env.frames[-1]["player"][features.Player.food_workers])
     assert completed > 0 and workers == 12 + completed
 
 

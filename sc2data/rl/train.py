@@ -149,6 +149,11 @@ class RLConfig:
     """PPO epochs over each rollout."""
     ent_coef: float = 0.01
     """Entropy bonus coefficient."""
+    ent_coef_final: float | None = None
+    """Entropy bonus at --steps, reached linearly from --ent-coef [default: --ent-coef
+    throughout]."""
+    # Annealing: a broad policy early, a sharp one at the end (whose most likely action is then
+    # what it plays); set before each update from the decisions trained (_curve).
     normalize_advantage: bool = False
     """Normalise advantages per minibatch (SB3's default; off: a zero-reward control then stays
     where it started)."""
@@ -170,7 +175,8 @@ class RLConfig:
     RESUMABLE = ("steps", "progress", "out", "processes", "device", "threads", "tensorboard")
     LEGACY: typing.ClassVar[dict[str, Any]] = {
         "obs": "stored", "obs_size": 64, "minimap": False, "policy": "independent", "gamma": 0.99,
-        "gae_lambda": 0.95, "epochs": 4, "ent_coef": 0.01, "normalize_advantage": True,
+        "gae_lambda": 0.95, "epochs": 4, "ent_coef": 0.01, "ent_coef_final": None,
+        "normalize_advantage": True,
         "target_kl": None, "smdp": False, "shaping": "event"}
     """Settings added since runs were first written, as those runs had them: a run folder whose
     ``config.json`` lacks one was trained so."""
@@ -238,8 +244,10 @@ def check_values(cfg: RLConfig) -> None:
             raise Sc2DataError(f"--{name.replace('_', '-')} must lie in [0, 1]")
     if cfg.epochs < 1:
         raise Sc2DataError("--epochs must be at least 1")
-    if not (cfg.ent_coef >= 0.0 and cfg.ent_coef < float("inf")):
-        raise Sc2DataError("--ent-coef must be a finite number, 0 or more")
+    for name in ("ent_coef", "ent_coef_final"):
+        value = getattr(cfg, name)
+        if value is not None and not (value >= 0.0 and value < float("inf")):
+            raise Sc2DataError(f"--{name.replace('_', '-')} must be a finite number, 0 or more")
     if cfg.target_kl is not None and not 0.0 < cfg.target_kl < float("inf"):
         raise Sc2DataError("--target-kl must be a positive finite number")
     from sc2data.rl.rewards import SHAPINGS
@@ -501,6 +509,15 @@ def _log_formats(cfg: RLConfig) -> list[str]:
     return ["csv", "tensorboard"]
 
 
+def ent_coef_at(cfg: RLConfig, timesteps: int) -> float:
+    """The entropy bonus of the update after ``timesteps`` decisions: ``--ent-coef``, or linear
+    from it to ``--ent-coef-final`` at ``--steps``."""
+    if cfg.ent_coef_final is None:
+        return cfg.ent_coef
+    done = min(1.0, timesteps / cfg.steps)
+    return cfg.ent_coef + (cfg.ent_coef_final - cfg.ent_coef) * done
+
+
 def _curve(cfg: RLConfig, run: Path, model: Any, rows: list[dict[str, Any]],
            state: dict[str, Any], progress: Any) -> Any:
     """The callback that keeps the run's record while PPO learns: episode rows, SMDP step
@@ -546,7 +563,9 @@ def _curve(cfg: RLConfig, run: Path, model: Any, rows: list[dict[str, Any]],
             self.finished.append(marines)
             self.game[i] = self.ret[i] = 0.0
 
-        def _on_rollout_end(self) -> None:
+        def _on_rollout_end(self) -> None:  # the update that follows uses this entropy bonus
+            self.model.ent_coef = ent_coef_at(cfg, self.num_timesteps)
+            self.logger.record("train/ent_coef", self.model.ent_coef)
             self.logger.record("game/pysc2_steps", state["env_steps"])
             self.logger.record("game/episodes", state["episodes"])
             if self.finished:

@@ -212,3 +212,26 @@ def test_a_run_that_fails_before_its_first_checkpoint_leaves_nothing(
     monkeypatch.undo()
     code, _, err = run_cli(["rl", "train", "--out", run, *TINY, "--seed", "5"], capsys)
     assert code == 0, err
+
+
+def _logged_ent_coefs(run: Path) -> list[float]:
+    values: list[float] = []
+    for log in sorted((run / runs.LOGS).glob("*/progress.csv")):
+        with log.open() as f:
+            values += [float(r["train/ent_coef"]) for r in csv.DictReader(f)]
+    return values
+
+
+def test_an_annealed_entropy_bonus_falls_linearly_to_its_final_value(
+        tmp_path: Path, trained: Path) -> None:
+    """--ent-coef-final: each update's bonus is linear in the decisions trained before it, from
+    --ent-coef to the final value at --steps (a resume with more --steps draws the line anew);
+    without it the bonus stays --ent-coef."""
+    run = tmp_path / "run"
+    anneal = ["--ent-coef", "0.04", "--ent-coef-final", "0"]
+    assert _cli(["rl", "train", "--out", run, *TINY, *anneal]) == 0  # updates at 32 and 64
+    assert _logged_ent_coefs(run) == pytest.approx([0.02, 0.0])
+    longer = [a if a != "64" else "128" for a in TINY]
+    assert _cli(["rl", "train", "--out", run, *longer, *anneal]) == 0  # at 96 and 128
+    assert _logged_ent_coefs(run) == pytest.approx([0.02, 0.0, 0.01, 0.0])
+    assert set(_logged_ent_coefs(trained)) == {0.01}

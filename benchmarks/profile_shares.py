@@ -10,7 +10,9 @@ cProfile (a run of its own, with its overhead) does not::
 
 With ``--idle`` py-spy also samples threads while they wait (the learner waiting for its
 workers); other threads' samples (tqdm's monitor, always waiting) are left out by ``--within
-FUNCTION``, which keeps only the stacks that hold it (``_train_locked`` for the learner). A function counts once per sample however deep it recurses, so shares of nested functions add
+FUNCTION``, which keeps only the stacks that hold it (``_train_locked`` for the learner).
+
+A function counts once per sample however deep it recurses, so shares of nested functions add
 up along a stack, not across it.
 """
 

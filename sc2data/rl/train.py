@@ -147,6 +147,8 @@ class RLConfig:
     """GAE lambda."""
     epochs: int = 4
     """PPO epochs over each rollout."""
+    learning_rate: float = 3e-4
+    """Adam's step size for the policy and value (SB3's default)."""
     ent_coef: float = 0.01
     """Entropy bonus coefficient."""
     ent_coef_final: float | None = None
@@ -175,7 +177,8 @@ class RLConfig:
     RESUMABLE = ("steps", "progress", "out", "processes", "device", "threads", "tensorboard")
     LEGACY: typing.ClassVar[dict[str, Any]] = {
         "obs": "stored", "obs_size": 64, "minimap": False, "policy": "independent", "gamma": 0.99,
-        "gae_lambda": 0.95, "epochs": 4, "ent_coef": 0.01, "ent_coef_final": None,
+        "gae_lambda": 0.95, "epochs": 4, "learning_rate": 3e-4, "ent_coef": 0.01,
+        "ent_coef_final": None,
         "normalize_advantage": True,
         "target_kl": None, "smdp": False, "shaping": "event"}
     """Settings added since runs were first written, as those runs had them: a run folder whose
@@ -244,6 +247,9 @@ def check_values(cfg: RLConfig) -> None:
             raise Sc2DataError(f"--{name.replace('_', '-')} must lie in [0, 1]")
     if cfg.epochs < 1:
         raise Sc2DataError("--epochs must be at least 1")
+    if not (0.0 < cfg.learning_rate < float("inf")):
+        raise Sc2DataError(f"--learning-rate must be a positive finite number, got "
+                           f"{cfg.learning_rate}")
     for name in ("ent_coef", "ent_coef_final"):
         value = getattr(cfg, name)
         if value is not None and not (value >= 0.0 and value < float("inf")):
@@ -346,7 +352,8 @@ def new_model(cfg: RLConfig, vec: Any, seed: int, device: str = "cpu") -> Any:
 
     return MaskablePPO(
         policy_class(cfg), vec, n_steps=cfg.rollout, batch_size=cfg.batch_size,
-        n_epochs=cfg.epochs, learning_rate=3e-4, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda,
+        n_epochs=cfg.epochs, learning_rate=cfg.learning_rate, gamma=cfg.gamma,
+        gae_lambda=cfg.gae_lambda,
         ent_coef=cfg.ent_coef, normalize_advantage=cfg.normalize_advantage,
         target_kl=cfg.target_kl, seed=seed, device=device, verbose=0,
         rollout_buffer_class=SMDPRolloutBuffer if cfg.smdp else None,

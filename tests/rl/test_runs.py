@@ -214,12 +214,16 @@ def test_a_run_that_fails_before_its_first_checkpoint_leaves_nothing(
     assert code == 0, err
 
 
-def _logged_ent_coefs(run: Path) -> list[float]:
+def _logged(run: Path, column: str) -> list[float]:
     values: list[float] = []
     for log in sorted((run / runs.LOGS).glob("*/progress.csv")):
         with log.open() as f:
-            values += [float(r["train/ent_coef"]) for r in csv.DictReader(f)]
+            values += [float(r[column]) for r in csv.DictReader(f) if r[column]]
     return values
+
+
+def _logged_ent_coefs(run: Path) -> list[float]:
+    return _logged(run, "train/ent_coef")
 
 
 def test_an_annealed_entropy_bonus_falls_linearly_to_its_final_value(
@@ -235,3 +239,10 @@ def test_an_annealed_entropy_bonus_falls_linearly_to_its_final_value(
     assert _cli(["rl", "train", "--out", run, *longer, *anneal]) == 0  # at 96 and 128
     assert _logged_ent_coefs(run) == pytest.approx([0.02, 0.0, 0.01, 0.0])
     assert set(_logged_ent_coefs(trained)) == {0.01}
+
+
+def test_the_learning_rate_reaches_ppo(tmp_path: Path, trained: Path) -> None:
+    run = tmp_path / "run"
+    assert _cli(["rl", "train", "--out", run, *TINY, "--learning-rate", "0.001"]) == 0
+    assert set(_logged(run, "train/learning_rate")) == {0.001}
+    assert set(_logged(trained, "train/learning_rate")) == {0.0003}

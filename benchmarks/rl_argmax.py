@@ -25,7 +25,8 @@ from sc2data.rl.train import game_loops, load_config
 
 def argmax_play(run: Path, decisions: int) -> dict[str, object]:
     """The functions argmax play chooses over ``decisions`` decisions of the first evaluation
-    episode, and the top three function probabilities at its first state."""
+    episode, the top three function probabilities at its first state, and the most likely
+    function's probability along the way (how far from a tie each argmax choice is)."""
     cfg = load_config(run)
     if cfg.action_space != "paper":
         raise SystemExit(f"{run} plays the {cfg.action_space} space; this script reads the paper "
@@ -40,7 +41,12 @@ def argmax_play(run: Path, decisions: int) -> dict[str, object]:
             dist = model.policy.get_distribution(obs_t, action_masks=env.action_masks())
             p = dist._function_log_probs().exp()[0].numpy()
         chosen: Counter[str] = Counter()
+        top: list[float] = []
         for _ in range(decisions):
+            with torch.no_grad():
+                o, _ = model.policy.obs_to_tensor(obs)
+                d = model.policy.get_distribution(o, action_masks=env.action_masks())
+                top.append(float(d._function_log_probs().exp().max()))
             action, _ = model.predict(obs, deterministic=True, action_masks=env.action_masks())
             obs, _, terminated, truncated, info = env.step(action)
             chosen[info["action"]] += 1
@@ -49,7 +55,9 @@ def argmax_play(run: Path, decisions: int) -> dict[str, object]:
     finally:
         env.close()
     return {"argmax": dict(chosen.most_common()),
-            "first_state_top_p": [round(float(x), 3) for x in np.sort(p)[::-1][:3]]}
+            "first_state_top_p": [round(float(x), 3) for x in np.sort(p)[::-1][:3]],
+            "top_p_median": round(float(np.median(top)), 3),
+            "top_p_range": [round(min(top), 3), round(max(top), 3)]}
 
 
 def main() -> None:
@@ -61,8 +69,8 @@ def main() -> None:
     torch.set_num_threads(1)
     result = {}
     for run in a.runs:
-        result[run.name] = argmax_play(run, a.decisions)
-        print(run.name, result[run.name], flush=True)
+        result[str(run)] = argmax_play(run, a.decisions)  # runs of several grids share names
+        print(run, result[str(run)], flush=True)
     if a.out:
         a.out.write_text(json.dumps(result, indent=1) + "\n")
 

@@ -28,6 +28,7 @@ import os
 import signal
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from multiprocessing import resource_tracker
 from multiprocessing.connection import Connection
 from typing import Any
 
@@ -302,7 +303,10 @@ class BuildMarinesVecEnv(VecEnv):
         # Ctrl-C must reach the learner (which stops the workers) and never a worker (a
         # traceback each): the workers start with SIGINT blocked, a mask that survives exec,
         # and ignore it before unblocking (_serve). The learner's own mask is restored at
-        # once, so a Ctrl-C that came meanwhile is delivered to it then.
+        # once, so a Ctrl-C that came meanwhile is delivered to it then. multiprocessing's
+        # resource tracker is started first: starting it (in the first p.start()) unblocks
+        # SIGINT on its way out, and the workers started after it would inherit that.
+        resource_tracker.ensure_running()
         mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
         try:
             for lo, hi in zip(bounds[:-1], bounds[1:]):

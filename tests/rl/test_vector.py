@@ -200,6 +200,34 @@ def test_kill_9_leaves_no_shared_memory_and_no_worker(tmp_path: Path) -> None:
     assert not list(arena.folder().glob(f"{arena.PREFIX}{proc.pid}-*"))
 
 
+_MASKS = """
+import signal
+from multiprocessing import util
+from sc2data.rl.vector import BuildMarinesVecEnv, GameConfig
+spawn = util.spawnv_passfds
+def recording(path, args, passfds):
+    if any("spawn_main" in str(a) for a in args):  # a worker, not the resource tracker
+        print("blocked" if signal.SIGINT in signal.pthread_sigmask(signal.SIG_BLOCK, []) else
+              "open", flush=True)
+    return spawn(path, args, passfds)
+util.spawnv_passfds = recording
+if __name__ == "__main__":
+    BuildMarinesVecEnv(GameConfig("macro"), 2, processes=2).close()
+"""
+
+
+def test_every_worker_starts_with_ctrl_c_blocked(tmp_path: Path) -> None:
+    """In a fresh interpreter (no resource tracker yet): starting multiprocessing's tracker
+    unblocks SIGINT, so a worker started after it could die of a Ctrl-C while it imports, with
+    a traceback (seen in tests/test_interrupts.py under load)."""
+    script = tmp_path / "masks.py"
+    script.write_text(_MASKS)
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                         timeout=120, cwd=Path(__file__).parents[2])
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["blocked", "blocked"], out.stdout
+
+
 def test_a_file_left_by_a_killed_start_is_swept(tmp_path: Path) -> None:
     """Killed between creating and unlinking its file (a moment at start-up): the next vector
     env removes the file of a creator that no longer runs, and only such files."""

@@ -26,6 +26,7 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import signal
+import threading
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from multiprocessing import resource_tracker
@@ -306,7 +307,14 @@ class BuildMarinesVecEnv(VecEnv):
         # once, so a Ctrl-C that came meanwhile is delivered to it then. multiprocessing's
         # resource tracker is started first: starting it (in the first p.start()) unblocks
         # SIGINT on its way out, and the workers started after it would inherit that.
+        # The mask is this thread's only: a Ctrl-C another thread of ours (torch's, tqdm's)
+        # receives still interrupts this one, so it is deferred (a handler that notes it) until
+        # every started worker has its start-up data, then raised again: interrupted mid-
+        # p.start(), a worker would read a half-written pipe and print a traceback.
         resource_tracker.ensure_running()
+        deferred: list[int] = []
+        main = threading.current_thread() is threading.main_thread()
+        previous = signal.signal(signal.SIGINT, lambda s, _: deferred.append(s)) if main else None
         mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
         try:
             for lo, hi in zip(bounds[:-1], bounds[1:]):
@@ -318,7 +326,11 @@ class BuildMarinesVecEnv(VecEnv):
                 self._conns.append(mine)
                 self._procs.append(p)
         finally:
+            if main:
+                signal.signal(signal.SIGINT, previous)
             signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+        if deferred:
+            signal.raise_signal(signal.SIGINT)
         self._collect()
 
     def _send(self, cmd: str, args: Sequence[Any] | None = None) -> None:

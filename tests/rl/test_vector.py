@@ -228,6 +228,38 @@ def test_every_worker_starts_with_ctrl_c_blocked(tmp_path: Path) -> None:
     assert out.stdout.split() == ["blocked", "blocked"], out.stdout
 
 
+_CTRL_C_MID_START = """
+import os, signal, threading, time
+from multiprocessing import util
+from sc2data.rl.vector import BuildMarinesVecEnv, GameConfig
+spawn = util.spawnv_passfds
+def spawn_then_ctrl_c(path, args, passfds):
+    pid = spawn(path, args, passfds)
+    if any("spawn_main" in str(a) for a in args):  # a worker, its start-up data not yet sent
+        threading.Thread(target=os.kill, args=(os.getpid(), signal.SIGINT)).start()
+        time.sleep(0.2)  # the other thread's Ctrl-C lands here, before the data is written
+    return pid
+util.spawnv_passfds = spawn_then_ctrl_c
+if __name__ == "__main__":
+    try:
+        BuildMarinesVecEnv(GameConfig("macro"), 2, processes=2)
+    except KeyboardInterrupt:
+        print("interrupted", flush=True)
+"""
+
+
+def test_a_ctrl_c_while_a_worker_starts_waits_for_its_start_up_data(tmp_path: Path) -> None:
+    """A Ctrl-C received by another thread while a worker is being started is raised once the
+    workers have their start-up data: the learner is interrupted, no worker prints a
+    traceback (its half-written pipe: EOFError)."""
+    script = tmp_path / "mid_start.py"
+    script.write_text(_CTRL_C_MID_START)
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                         timeout=120, cwd=Path(__file__).parents[2])
+    assert out.stdout.split() == ["interrupted"], (out.stdout, out.stderr)
+    assert "Traceback" not in out.stderr, out.stderr
+
+
 def test_a_file_left_by_a_killed_start_is_swept(tmp_path: Path) -> None:
     """Killed between creating and unlinking its file (a moment at start-up): the next vector
     env removes the file of a creator that no longer runs, and only such files."""

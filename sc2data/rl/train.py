@@ -178,9 +178,8 @@ class RLConfig:
     LEGACY: typing.ClassVar[dict[str, Any]] = {
         "obs": "stored", "obs_size": 64, "minimap": False, "policy": "independent", "gamma": 0.99,
         "gae_lambda": 0.95, "epochs": 4, "learning_rate": 3e-4, "ent_coef": 0.01,
-        "ent_coef_final": None,
-        "normalize_advantage": True,
-        "target_kl": None, "smdp": False, "shaping": "event"}
+        "ent_coef_final": None, "normalize_advantage": True, "target_kl": None, "smdp": False,
+        "shaping": "event"}
     """Settings added since runs were first written, as those runs had them: a run folder whose
     ``config.json`` lacks one was trained so."""
 

@@ -326,8 +326,9 @@ class BuildMarinesVecEnv(VecEnv):
                 self._conns.append(mine)
                 self._procs.append(p)
         finally:
-            if main:
-                signal.signal(signal.SIGINT, previous)
+            if main:  # None: a handler not set from Python; Python's own stands in for it
+                signal.signal(signal.SIGINT, signal.default_int_handler if previous is None
+                              else previous)
             signal.pthread_sigmask(signal.SIG_SETMASK, mask)
         if deferred:
             signal.raise_signal(signal.SIGINT)

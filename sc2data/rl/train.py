@@ -154,8 +154,8 @@ class RLConfig:
     ent_coef_final: float | None = None
     """Entropy bonus at --steps, reached linearly from --ent-coef [default: --ent-coef
     throughout]."""
-    # Annealing: a broad policy early, a sharp one at the end (whose most likely action is then
-    # what it plays); set before each update from the decisions trained (_curve).
+    # Set before each update from the decisions trained (_curve), so a resumed run goes on
+    # along the same line.
     normalize_advantage: bool = False
     """Normalise advantages per minibatch (SB3's default; off: a zero-reward control then stays
     where it started)."""

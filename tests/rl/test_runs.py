@@ -222,10 +222,6 @@ def _logged(run: Path, column: str) -> list[float]:
     return values
 
 
-def _logged_ent_coefs(run: Path) -> list[float]:
-    return _logged(run, "train/ent_coef")
-
-
 def test_an_annealed_entropy_bonus_falls_linearly_to_its_final_value(
         tmp_path: Path, trained: Path) -> None:
     """--ent-coef-final: each update's bonus is linear in the decisions trained before it, from
@@ -234,11 +230,11 @@ def test_an_annealed_entropy_bonus_falls_linearly_to_its_final_value(
     run = tmp_path / "run"
     anneal = ["--ent-coef", "0.04", "--ent-coef-final", "0"]
     assert _cli(["rl", "train", "--out", run, *TINY, *anneal]) == 0  # updates at 32 and 64
-    assert _logged_ent_coefs(run) == pytest.approx([0.02, 0.0])
+    assert _logged(run, "train/ent_coef") == pytest.approx([0.02, 0.0])
     longer = [a if a != "64" else "128" for a in TINY]
     assert _cli(["rl", "train", "--out", run, *longer, *anneal]) == 0  # at 96 and 128
-    assert _logged_ent_coefs(run) == pytest.approx([0.02, 0.0, 0.01, 0.0])
-    assert set(_logged_ent_coefs(trained)) == {0.01}
+    assert _logged(run, "train/ent_coef") == pytest.approx([0.02, 0.0, 0.01, 0.0])
+    assert set(_logged(trained, "train/ent_coef")) == {0.01}
 
 
 def test_the_learning_rate_reaches_ppo(tmp_path: Path, trained: Path) -> None:

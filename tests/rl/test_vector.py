@@ -200,6 +200,14 @@ def test_kill_9_leaves_no_shared_memory_and_no_worker(tmp_path: Path) -> None:
     assert not list(arena.folder().glob(f"{arena.PREFIX}{proc.pid}-*"))
 
 
+def _run_script(tmp_path: Path, text: str) -> subprocess.CompletedProcess[str]:
+    """``text`` run as a script in a fresh interpreter (no resource tracker yet)."""
+    script = tmp_path / "script.py"
+    script.write_text(text)
+    return subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                          timeout=120, cwd=Path(__file__).parents[2])
+
+
 _MASKS = """
 import signal
 from multiprocessing import util
@@ -220,10 +228,7 @@ def test_every_worker_starts_with_ctrl_c_blocked(tmp_path: Path) -> None:
     """In a fresh interpreter (no resource tracker yet): starting multiprocessing's tracker
     unblocks SIGINT, so a worker started after it could die of a Ctrl-C while it imports, with
     a traceback (seen in tests/test_interrupts.py under load)."""
-    script = tmp_path / "masks.py"
-    script.write_text(_MASKS)
-    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
-                         timeout=120, cwd=Path(__file__).parents[2])
+    out = _run_script(tmp_path, _MASKS)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ["blocked", "blocked"], out.stdout
 
@@ -252,10 +257,7 @@ def test_a_ctrl_c_while_a_worker_starts_waits_for_its_start_up_data(tmp_path: Pa
     """A Ctrl-C received by another thread while a worker is being started is raised once the
     workers have their start-up data: the learner is interrupted, no worker prints a
     traceback (its half-written pipe: EOFError)."""
-    script = tmp_path / "mid_start.py"
-    script.write_text(_CTRL_C_MID_START)
-    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
-                         timeout=120, cwd=Path(__file__).parents[2])
+    out = _run_script(tmp_path, _CTRL_C_MID_START)
     assert out.stdout.split() == ["interrupted"], (out.stdout, out.stderr)
     assert "Traceback" not in out.stderr, out.stderr
 

@@ -2,7 +2,9 @@
 
 :class:`~sc2data.rl.vector.BuildMarinesVecEnv` hands a shaping object, once per vector step, the
 pysc2 frames of each game's last decision (its first frame the previous decision's last, then
-one per pysc2 step; the arrays the worker processes wrote) and which games ended. The object
+one per pysc2 step; the arrays the worker processes wrote) and which games ended — of every
+game, or of games ``first`` onwards when a pipelined rollout steps the games a part at a time
+(:mod:`sc2data.rl.pipeline`). The object
 forms every game's two-frame stacks, judges them all in one batch (one MEM call for the
 narration reward) and returns each game's bonus. The bonuses are those of the per-game wrappers
 (:class:`~sc2data.rl.rewards.RuleShaping`, :class:`~sc2data.rl.rewards.NarrationShaping`) on the
@@ -76,7 +78,7 @@ class BatchedRules(_Potential):
         """A new vector of ``n`` games (nothing to remember between decisions)."""
 
     def __call__(self, frames: Mapping[str, np.ndarray], n_frames: np.ndarray,
-                 done: np.ndarray) -> tuple[np.ndarray, list[dict[str, Any]]]:
+                 done: np.ndarray, first: int = 0) -> tuple[np.ndarray, list[dict[str, Any]]]:
         if self.shaping == "potential":
             from sc2data.rl.rewards import progress
 
@@ -131,8 +133,10 @@ class BatchedNarration(_Potential):
         self.matched = np.zeros(n, dtype=np.int64)
 
     def __call__(self, frames: Mapping[str, np.ndarray], n_frames: np.ndarray,
-                 done: np.ndarray) -> tuple[np.ndarray, list[dict[str, Any]]]:
+                 done: np.ndarray, first: int = 0) -> tuple[np.ndarray, list[dict[str, Any]]]:
         batch, counts = decision_stacks(frames, n_frames, self.schema)
+        rows = slice(first, first + len(counts))  # these games' narration state, as views
+        index, waited_for, matched = self.index[rows], self.waited[rows], self.matched[rows]
         m = len(self.commands)
         hit = (np.asarray(self.scorer.distances(batch, self.commands)) < self.threshold
                if len(batch) else np.zeros((0, m), dtype=bool))
@@ -142,7 +146,7 @@ class BatchedNarration(_Potential):
         end = np.cumsum(counts)
         for i, n in enumerate(counts):
             mine = hit[end[i] - n:end[i]]
-            k, start = int(self.index[i]), 0
+            k, start = int(index[i]), 0
             while start < n:
                 js = np.flatnonzero(mine[start:, k])
                 if not len(js):
@@ -151,17 +155,17 @@ class BatchedNarration(_Potential):
                 made[i] += 1
                 k = (k + 1) % m
                 start += int(js[0]) + 1
-            waited = 0 if made[i] else int(self.waited[i]) + 1
+            waited = 0 if made[i] else int(waited_for[i]) + 1
             if self.patience and waited >= self.patience:
                 k, waited = (k + 1) % m, 0
             infos.append({"narration_index": k})
-            self.index[i], self.waited[i] = (0, 0) if done[i] else (k, waited)
+            index[i], waited_for[i] = (0, 0) if done[i] else (k, waited)
         if self.shaping == "potential":
-            before = self.bonus * self.matched
-            after = self.bonus * (self.matched + made)
+            before = self.bonus * matched
+            after = self.bonus * (matched + made)
             bonus = potential_step(before, after, done, self.gamma,
                                    counts if self.smdp else None)
-        self.matched = np.where(np.asarray(done, dtype=bool), 0, self.matched + made)
+        matched[:] = np.where(np.asarray(done, dtype=bool), 0, matched + made)
         return bonus, infos
 
 
@@ -175,7 +179,7 @@ class BatchedZero:
         """Nothing to remember."""
 
     def __call__(self, frames: Mapping[str, np.ndarray], n_frames: np.ndarray,
-                 done: np.ndarray) -> tuple[np.ndarray, list[dict[str, Any]]]:
+                 done: np.ndarray, first: int = 0) -> tuple[np.ndarray, list[dict[str, Any]]]:
         return np.zeros(len(n_frames)), [{} for _ in n_frames]
 
 

@@ -132,16 +132,17 @@ def check_model(run: Path, state: dict[str, Any]) -> None:
 
 
 def load_model(run: Path, env: Any, device: str = "cpu", attach: bool = False) -> Any:
-    """``RUN/model.zip`` as a MaskablePPO agent (checked by content first: :func:`read_state`);
-    one line unless it observes and acts in ``env``'s spaces (a model of another action space
-    or observation). ``attach``: the agent trains on ``env`` (a vector env)."""
+    """``RUN/model.zip`` as a MaskablePPO agent (:class:`~sc2data.rl.pipeline.PipelinedPPO`;
+    checked by content first: :func:`read_state`); one line unless it observes and acts in
+    ``env``'s spaces (a model of another action space or observation). ``attach``: the agent
+    trains on ``env`` (a vector env)."""
     import zipfile
 
-    from sb3_contrib import MaskablePPO
+    from sc2data.rl.pipeline import PipelinedPPO
 
     path = run / MODEL
     try:
-        model = MaskablePPO.load(path, env=env if attach else None, device=device)
+        model = PipelinedPPO.load(path, env=env if attach else None, device=device)
     except (ValueError, KeyError, EOFError, RuntimeError, zipfile.BadZipFile) as e:
         if "spaces do not match" in str(e):  # SB3's check against the env
             raise Sc2DataError(f"{path} was trained for other observations or actions than "

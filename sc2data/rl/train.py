@@ -125,6 +125,11 @@ class RLConfig:
     """compact: 64 or 32 pixels a side."""
     minimap: bool = False
     """compact: add the minimap's channels."""
+    env_groups: int = 2
+    """Games stepped a group at a time: the learner acts for one group while the others step
+    (1: all in lockstep; capped at --envs)."""
+    # sc2data.rl.pipeline: the same decisions as lockstep, sampled a group at a time, so the
+    # same seed gives another run for another number of groups (not for other --processes).
     processes: int | None = None
     """Worker processes stepping the games (0: in this process) [default: one per core; none
     for one env]."""
@@ -133,9 +138,8 @@ class RLConfig:
     """Policy and MEM on cpu, cuda or auto (cuda where a GPU is present)."""
     threads: int | None = None
     """Torch threads of the learner (policy, MEM, updates) [default: one per core]."""
-    # The games' workers wait while the learner works, so its threads take no core from them:
-    # two threads halved an update on this project's 2-core machine (BENCHMARKS.md, "RL at
-    # speed").
+    # The games' workers wait while PPO updates, so its threads take no core from them: two
+    # threads halved an update on this project's 2-core machine (BENCHMARKS.md, "RL at speed").
     policy: str = "auto"
     """spatial (paper space: the point given the function), independent (SB3's heads) or
     auto."""
@@ -179,7 +183,7 @@ class RLConfig:
         "obs": "stored", "obs_size": 64, "minimap": False, "policy": "independent", "gamma": 0.99,
         "gae_lambda": 0.95, "epochs": 4, "learning_rate": 3e-4, "ent_coef": 0.01,
         "ent_coef_final": None, "normalize_advantage": True, "target_kl": None, "smdp": False,
-        "shaping": "event"}
+        "shaping": "event", "env_groups": 1}
     """Settings added since runs were first written, as those runs had them: a run folder whose
     ``config.json`` lacks one was trained so."""
 
@@ -216,7 +220,7 @@ def check_values(cfg: RLConfig) -> None:
         if getattr(cfg, name) not in known:
             raise Sc2DataError(f"unknown {name.replace('_', ' ')} {getattr(cfg, name)!r}; choose "
                                f"one of: {', '.join(known)}")
-    for name in ("steps", "envs", "rollout", "batch_size", "checkpoint_every"):
+    for name in ("steps", "envs", "rollout", "batch_size", "checkpoint_every", "env_groups"):
         if getattr(cfg, name) < 1:
             raise Sc2DataError(f"--{name.replace('_', '-')} must be at least 1")
     if cfg.episode_steps is not None and cfg.episode_steps < 1:
@@ -345,11 +349,10 @@ def make_vec_env(cfg: RLConfig, scorer: Any = None, narration: Any = None) -> An
 def new_model(cfg: RLConfig, vec: Any, seed: int, device: str = "cpu") -> Any:
     """An untrained MaskablePPO agent of the run's settings on ``vec`` (seeded: the same seed
     gives the same initial policy)."""
-    from sb3_contrib import MaskablePPO
-
+    from sc2data.rl.pipeline import PipelinedPPO
     from sc2data.rl.smdp import SMDPRolloutBuffer
 
-    return MaskablePPO(
+    model = PipelinedPPO(
         policy_class(cfg), vec, n_steps=cfg.rollout, batch_size=cfg.batch_size,
         n_epochs=cfg.epochs, learning_rate=cfg.learning_rate, gamma=cfg.gamma,
         gae_lambda=cfg.gae_lambda,
@@ -357,6 +360,8 @@ def new_model(cfg: RLConfig, vec: Any, seed: int, device: str = "cpu") -> Any:
         target_kl=cfg.target_kl, seed=seed, device=device, verbose=0,
         rollout_buffer_class=SMDPRolloutBuffer if cfg.smdp else None,
         policy_kwargs=policy_kwargs(cfg))
+    model.groups = cfg.env_groups
+    return model
 
 
 POLICIES: tuple[str, ...] = ("auto", "spatial", "independent")
@@ -455,8 +460,8 @@ def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path
     import torch
     from stable_baselines3.common.logger import configure
 
-    # The learner and the games' workers take turns (a vector step, then the batched reward and
-    # policy; PPO's update while the workers wait), so the learner may use every core.
+    # PPO's update runs while the games' workers wait, so it may use every core (a pipelined
+    # rollout, sc2data.rl.pipeline, runs on one thread while the workers step beside it).
     torch.set_num_threads(cfg.threads or cores())
     device = resolve_device(cfg.device)
     formats = _log_formats(cfg)
@@ -468,6 +473,7 @@ def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path
         if state["timesteps"]:
             model = runs.load_model(run, vec, device, attach=True)
             model.set_random_seed(seed)
+            model.groups = cfg.env_groups
         else:
             model = new_model(cfg, vec, seed, device)
         model.set_logger(configure(str(run / runs.LOGS / str(state["resumes"])), formats))

@@ -12,6 +12,9 @@ message and nothing else crosses a pipe (EnvPool, Sample Factory and PufferLib w
 The reward is computed here, in the learner's process, once per vector step for all games
 (:mod:`sc2data.rl.batched`): the narration reward scores every game's new two-frame stacks in one
 MEM call, from the frames the workers already extracted; one MEM is loaded, not one per worker.
+A contiguous part of the games can be stepped and waited for on its own, its reward scored
+for those games (``step_async_rows``), so that the learner works for one part while another
+steps (:mod:`sc2data.rl.pipeline`).
 
 Semantics are those of SB3's ``DummyVecEnv`` over the same games: game ``i`` is reset with
 ``seed + i`` after :meth:`seed` (then continues its own stream), a game that ends is reset at
@@ -161,10 +164,11 @@ class GameSlice:
             self.a["n_frames"][i] = 1
             self.fresh[j] = True
 
-    def step(self) -> None:
+    def step(self, lo: int, hi: int) -> None:
+        """Step this slice's games among games ``lo`` to ``hi`` of the vector."""
         actions = self.a["actions"]
-        for j, env in enumerate(self.envs):
-            i = self.lo + j
+        for j in range(max(lo, self.lo) - self.lo, min(hi, self.hi) - self.lo):
+            i, env = self.lo + j, self.envs[j]
             action = actions[i, 0] if actions.shape[1] == 1 else actions[i]
             obs, reward, terminated, truncated, info = env.step(action)
             self._frames(i, j, env)
@@ -222,7 +226,7 @@ def _serve(conn: Connection, cfg: GameConfig, lo: int, hi: int, path: str,
         while True:
             cmd, arg = conn.recv()
             if cmd == "step":
-                games.step()
+                games.step(*arg)
             elif cmd == "reset":
                 games.reset(arg)
             elif cmd == "close":
@@ -238,6 +242,13 @@ def _serve(conn: Connection, cfg: GameConfig, lo: int, hi: int, path: str,
     finally:
         if games is not None:
             games.close()
+
+
+def spans(n: int, k: int) -> list[tuple[int, int]]:
+    """Games ``0..n`` in ``k`` contiguous parts as even as can be: how games are spread over
+    worker processes, and over the groups of a pipelined rollout (:mod:`sc2data.rl.pipeline`)."""
+    bounds = np.linspace(0, n, k + 1).round().astype(int)
+    return [(int(lo), int(hi)) for lo, hi in zip(bounds[:-1], bounds[1:])]
 
 
 def default_processes(n: int) -> int:
@@ -256,6 +267,10 @@ class BuildMarinesVecEnv(VecEnv):
 
     ``shaping`` (:mod:`sc2data.rl.batched`) adds its bonus to the game's reward and reads the
     frames of its schema; ``None`` is the game's sparse reward.
+
+    Besides SB3's ``step_async``/``step_wait`` for every game, :meth:`step_async_rows` and
+    :meth:`step_wait_rows` step a contiguous part of the games (waited for in the order sent),
+    so that a learner can act for one part while another steps (:mod:`sc2data.rl.pipeline`).
     """
 
     def __init__(self, cfg: GameConfig, n: int, *, processes: int | None = None,
@@ -276,6 +291,9 @@ class BuildMarinesVecEnv(VecEnv):
         obs_space, act_space = probe.observation_space, probe.action_space
         self._conns: list[Connection] = []
         self._procs: list[Any] = []
+        self._slices = spans(n, self.processes)
+        self._inflight: list[tuple[int, int, list[int]]] = []
+        """Parts sent to step and not yet waited for: their rows and the workers stepping them."""
         self._local: GameSlice | None = None
         self.arena = Arena.private(fields) if self.processes == 0 else Arena.create(fields)
         try:
@@ -300,7 +318,6 @@ class BuildMarinesVecEnv(VecEnv):
 
     def _start(self, cfg: GameConfig, n: int, fields: list[Field]) -> None:
         ctx = mp.get_context("spawn")
-        bounds = np.linspace(0, n, self.processes + 1).round().astype(int)
         # Ctrl-C must reach the learner (which stops the workers) and never a worker (a
         # traceback each): the workers start with SIGINT blocked, a mask that survives exec,
         # and ignore it before unblocking (_serve). The learner's own mask is restored at
@@ -317,9 +334,9 @@ class BuildMarinesVecEnv(VecEnv):
         previous = signal.signal(signal.SIGINT, lambda s, _: deferred.append(s)) if main else None
         mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
         try:
-            for lo, hi in zip(bounds[:-1], bounds[1:]):
+            for lo, hi in self._slices:
                 mine, theirs = ctx.Pipe()
-                p = ctx.Process(target=_serve, args=(theirs, cfg, int(lo), int(hi),
+                p = ctx.Process(target=_serve, args=(theirs, cfg, lo, hi,
                                                      self.arena.path, fields), daemon=True)
                 p.start()
                 theirs.close()
@@ -334,18 +351,17 @@ class BuildMarinesVecEnv(VecEnv):
             signal.raise_signal(signal.SIGINT)
         self._collect()
 
-    def _send(self, cmd: str, args: Sequence[Any] | None = None) -> None:
+    def _send(self, cmd: str, args: Sequence[Any] | None = None,
+              workers: Sequence[int] | None = None) -> None:
         if self._local is not None:
-            if cmd == "step":
-                self._local.step()
-            elif cmd == "reset":
+            if cmd == "reset":
                 self._local.reset(args[0] if args else [None] * self.num_envs)
             return
-        for j, (conn, p) in enumerate(zip(self._conns, self._procs)):
+        for j in range(len(self._conns)) if workers is None else workers:
             try:
-                conn.send((cmd, None if args is None else args[j]))
+                self._conns[j].send((cmd, None if args is None else args[j]))
             except (BrokenPipeError, ConnectionResetError):
-                self._died(p)
+                self._died(self._procs[j])
 
     def _died(self, p: Any) -> None:
         p.join(timeout=1)
@@ -353,8 +369,9 @@ class BuildMarinesVecEnv(VecEnv):
         raise Sc2DataError(f"an environment process ended unexpectedly (exit code "
                            f"{p.exitcode}); rerun the same command to resume") from None
 
-    def _collect(self) -> None:
-        for conn, p in zip(self._conns, self._procs):
+    def _collect(self, workers: Sequence[int] | None = None) -> None:
+        for j in range(len(self._conns)) if workers is None else workers:
+            conn, p = self._conns[j], self._procs[j]
             try:
                 kind, msg = conn.recv()
             except (EOFError, ConnectionResetError):
@@ -366,8 +383,7 @@ class BuildMarinesVecEnv(VecEnv):
     def _per_worker(self, values: Sequence[Any]) -> list[list[Any]]:
         if self._local is not None:
             return [list(values)]
-        bounds = np.linspace(0, self.num_envs, self.processes + 1).round().astype(int)
-        return [list(values[lo:hi]) for lo, hi in zip(bounds[:-1], bounds[1:])]
+        return [list(values[lo:hi]) for lo, hi in self._slices]
 
     # -- VecEnv ----------------------------------------------------------------------------------
 
@@ -384,43 +400,58 @@ class BuildMarinesVecEnv(VecEnv):
         return self._obs()
 
     def step_async(self, actions: np.ndarray) -> None:
-        acts = np.asarray(actions).reshape(self.num_envs, -1)
-        self.a["actions"][...] = acts
-        if self._local is None:
-            self._send("step")
+        self.step_async_rows(0, self.num_envs, actions)
 
     def step_wait(self) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, list[dict]]:
+        return self.step_wait_rows(0, self.num_envs)
+
+    def step_async_rows(self, lo: int, hi: int, actions: np.ndarray) -> None:
+        """Start stepping games ``lo`` to ``hi`` with ``actions`` (one row per game)."""
+        self.a["actions"][lo:hi] = np.asarray(actions).reshape(hi - lo, -1)
+        workers = [j for j, (a, b) in enumerate(self._slices) if a < hi and lo < b]
+        self._inflight.append((lo, hi, workers))
+        self._send("step", [(lo, hi)] * len(self._slices), workers)
+
+    def step_wait_rows(self, lo: int, hi: int
+                       ) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, list[dict]]:
+        """Wait for games ``lo`` to ``hi`` (the oldest part sent) and give what ``step_wait``
+        gives, for those games."""
+        if not self._inflight or self._inflight[0][:2] != (lo, hi):
+            raise RuntimeError(f"games {lo}-{hi} waited for out of the order they were sent in")
+        workers = self._inflight.pop(0)[2]
         if self._local is not None:
-            self._local.step()
+            self._local.step(lo, hi)
         else:
-            self._collect()
+            self._collect(workers)
         a = self.a
-        game = a["game_reward"].copy()
-        done = a["done"].copy()
-        extra = np.zeros(self.num_envs)
-        extra_info: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
+        game = a["game_reward"][lo:hi].copy()
+        done = a["done"][lo:hi].copy()
+        extra = np.zeros(hi - lo)
+        extra_info: list[dict[str, Any]] = [{} for _ in range(lo, hi)]
         if self.shaping is not None:
-            extra, extra_info = self.shaping(self.frame_arrays, a["n_frames"], done)
+            frames = {k: v[lo:hi] for k, v in self.frame_arrays.items()}
+            extra, extra_info = self.shaping(frames, a["n_frames"][lo:hi], done, first=lo)
             extra = extra + (self.game_weight - 1.0) * game  # a control may take the game's away
         infos: list[dict[str, Any]] = []
-        for i in range(self.num_envs):
-            info = {"game_reward": float(game[i]), "shaping": float(extra[i]),
+        for j, i in enumerate(range(lo, hi)):
+            info = {"game_reward": float(game[j]), "shaping": float(extra[j]),
                     "env_steps": int(a["env_steps"][i]), "invalid": bool(a["invalid"][i]),
                     "game_loop": int(a["game_loop"][i]), "marines": int(a["marines"][i]),
-                    **extra_info[i]}
-            if done[i]:
+                    **extra_info[j]}
+            if done[j]:
                 info["terminal_observation"] = {k: a[f"final/{k}"][i].copy()
                                                 for k in self.obs_keys}
             infos.append(info)
-        return self._obs(), (game + extra).astype(np.float32), done, infos
+        return self._obs(lo, hi), (game + extra).astype(np.float32), done, infos
 
-    def _obs(self) -> dict[str, np.ndarray]:
+    def _obs(self, lo: int = 0, hi: int | None = None) -> dict[str, np.ndarray]:
         # Copies: SB3 keeps the last observation while the next step overwrites the arrays.
-        return {k: self.a[f"obs/{k}"].copy() for k in self.obs_keys}
+        return {k: self.a[f"obs/{k}"][lo:hi].copy() for k in self.obs_keys}
 
-    def action_masks(self) -> np.ndarray:
-        """``(n, mask length)``: every game's mask (sb3-contrib's protocol, batched)."""
-        return self.a["masks"].copy()
+    def action_masks(self, lo: int = 0, hi: int | None = None) -> np.ndarray:
+        """``(n, mask length)``: every game's mask (sb3-contrib's protocol, batched), or games
+        ``lo`` to ``hi``'s."""
+        return self.a["masks"][lo:hi].copy()
 
     def close(self) -> None:
         if getattr(self, "_closed", False):

@@ -1,0 +1,123 @@
+"""Pipelined rollouts: the learner acts for one group of games while another group steps.
+
+MaskablePPO collects a rollout in lockstep: the policy acts for every game, then every game
+steps while the learner waits, then the reward is scored for every game while the games wait.
+:class:`PipelinedPPO` splits the games into ``groups`` contiguous parts (as the worker processes
+hold them, :func:`~sc2data.rl.vector.spans`) and takes them in turn: while group 0's games step
+in their worker, the learner scores group 1's reward and acts for it, and so on — Sample
+Factory's double-buffered sampling. The learner's work and the games' then overlap instead of
+adding up (BENCHMARKS.md, "RL at speed").
+
+The data are what lockstep collects: every decision of a rollout is taken by that rollout's
+policy, a rollout has the same decisions, and the buffer, the callback and the update see one
+row per vector step, every game in order. What differs is the order of the random draws (the
+policy samples a group at a time), so ``groups`` is part of a run's settings, and the same seed
+and the same ``groups`` give the same run whatever the worker processes are.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch as th
+from sb3_contrib import MaskablePPO
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.utils import obs_as_tensor
+
+from sc2data.rl.vector import spans
+
+
+class PipelinedPPO(MaskablePPO):
+    """MaskablePPO that collects its rollouts a group of games at a time (module docstring) on
+    an env with ``step_async_rows``/``step_wait_rows``
+    (:class:`~sc2data.rl.vector.BuildMarinesVecEnv`); with one group, or on any other env,
+    MaskablePPO's own collection."""
+
+    groups: int = 1
+    """Groups of games (set after building or loading: it is not saved with the model)."""
+
+    def _excluded_save_params(self) -> list[str]:
+        return [*super()._excluded_save_params(), "groups"]
+
+    def collect_rollouts(self, env: Any, callback: BaseCallback, rollout_buffer: Any,
+                         n_rollout_steps: int, use_masking: bool = True) -> bool:
+        parts = spans(env.num_envs, min(self.groups, env.num_envs))
+        if len(parts) < 2 or not use_masking or not hasattr(env, "step_async_rows"):
+            return bool(super().collect_rollouts(env, callback, rollout_buffer,
+                                                 n_rollout_steps, use_masking))
+        threads = th.get_num_threads()
+        th.set_num_threads(1)  # the other cores step the games meanwhile; the update has them all
+        try:
+            return self._collect(env, parts, callback, rollout_buffer, n_rollout_steps)
+        finally:
+            th.set_num_threads(threads)
+
+    def _collect(self, env: Any, parts: list[tuple[int, int]], callback: BaseCallback,
+                 rollout_buffer: Any, n_rollout_steps: int) -> bool:
+        assert self._last_obs is not None, "No previous observation was provided"
+        self.policy.set_training_mode(False)
+        rollout_buffer.reset()
+        callback.on_rollout_start()
+        obs: dict[str, np.ndarray] = self._last_obs  # type: ignore[assignment]
+        masks = env.action_masks()
+        taking = [self._act(env, lo, hi, {k: v[lo:hi] for k, v in obs.items()}, masks[lo:hi])
+                  for lo, hi in parts]  # each group's decision, stepping
+        for n_steps in range(n_rollout_steps):
+            last = n_steps == n_rollout_steps - 1
+            stepped, taken = [], taking
+            taking = []
+            for lo, hi in parts:
+                part_obs, part_rewards, part_dones, part_infos = env.step_wait_rows(lo, hi)
+                part_masks = env.action_masks(lo, hi)
+                self._bootstrap_timeouts(part_rewards, part_dones, part_infos)
+                stepped.append((part_obs, part_rewards, part_dones, part_infos, part_masks))
+                if not last:  # the group's next decision, taken while the next group steps
+                    taking.append(self._act(env, lo, hi, part_obs, part_masks))
+            actions = np.concatenate([a for a, _, _ in taken])
+            values = th.cat([v for _, v, _ in taken])
+            log_probs = th.cat([p for _, _, p in taken])
+            new_obs = {k: np.concatenate([s[0][k] for s in stepped]) for k in obs}
+            rewards = np.concatenate([s[1] for s in stepped])
+            dones = np.concatenate([s[2] for s in stepped])
+            infos = [i for s in stepped for i in s[3]]
+            self.num_timesteps += env.num_envs
+            callback.update_locals(locals())
+            if not callback.on_step():
+                for lo, hi in parts[:len(taking)]:  # nothing left stepping
+                    env.step_wait_rows(lo, hi)
+                return False
+            self._update_info_buffer(infos, dones)
+            rollout_buffer.add(self._last_obs, actions.reshape(env.num_envs, -1), rewards,
+                               self._last_episode_starts, values, log_probs,
+                               action_masks=masks)
+            self._last_obs = obs = new_obs  # type: ignore[assignment]
+            self._last_episode_starts = dones
+            masks = np.concatenate([s[4] for s in stepped])
+        with th.no_grad():
+            values = self.policy.predict_values(obs_as_tensor(obs, self.device))  # type: ignore[arg-type]
+        rollout_buffer.compute_returns_and_advantage(last_values=values, dones=dones)
+        callback.on_rollout_end()
+        return True
+
+    def _act(self, env: Any, lo: int, hi: int, obs: dict[str, np.ndarray], masks: np.ndarray
+             ) -> tuple[np.ndarray, th.Tensor, th.Tensor]:
+        """The policy's decision for games ``lo`` to ``hi``, sent to step."""
+        with th.no_grad():
+            actions, values, log_probs = self.policy(obs_as_tensor(obs, self.device),  # type: ignore[arg-type]
+                                                     action_masks=masks)
+        taken = actions.cpu().numpy()
+        env.step_async_rows(lo, hi, taken)
+        return taken, values, log_probs
+
+    def _bootstrap_timeouts(self, rewards: np.ndarray, dones: np.ndarray,
+                            infos: list[dict[str, Any]]) -> None:
+        """A game cut by a time limit it cannot see: its reward plus γ·V(last observation), as
+        SB3 does (its issue #633)."""
+        for i, done in enumerate(dones):
+            info = infos[i]
+            if done and info.get("terminal_observation") is not None \
+                    and info.get("TimeLimit.truncated", False):
+                terminal = self.policy.obs_to_tensor(info["terminal_observation"])[0]
+                with th.no_grad():
+                    rewards[i] += self.gamma * self.policy.predict_values(terminal)[0]

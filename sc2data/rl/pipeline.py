@@ -12,7 +12,9 @@ The data are what lockstep collects: every decision of a rollout is taken by tha
 policy, a rollout has the same decisions, and the buffer, the callback and the update see one
 row per vector step, every game in order. What differs is the order of the random draws (the
 policy samples a group at a time), so ``groups`` is part of a run's settings, and the same seed
-and the same ``groups`` give the same run whatever the worker processes are.
+and the same ``groups`` give the same run whatever the worker processes are. (SB3's bootstrap of
+a game cut by a time limit has nothing to do here: a BuildMarines game ends by the map's own
+timer, the true end of its episode, never reported as a truncation.)
 """
 
 from __future__ import annotations
@@ -70,7 +72,6 @@ class PipelinedPPO(MaskablePPO):
             for lo, hi in parts:
                 part_obs, part_rewards, part_dones, part_infos = env.step_wait_rows(lo, hi)
                 part_masks = env.action_masks(lo, hi)
-                self._bootstrap_timeouts(part_rewards, part_dones, part_infos)
                 stepped.append((part_obs, part_rewards, part_dones, part_infos, part_masks))
                 if not last:  # the group's next decision, taken while the next group steps
                     taking.append(self._act(env, lo, hi, part_obs, part_masks))
@@ -109,15 +110,3 @@ class PipelinedPPO(MaskablePPO):
         taken = actions.cpu().numpy()
         env.step_async_rows(lo, hi, taken)
         return taken, values, log_probs
-
-    def _bootstrap_timeouts(self, rewards: np.ndarray, dones: np.ndarray,
-                            infos: list[dict[str, Any]]) -> None:
-        """A game cut by a time limit it cannot see: its reward plus γ·V(last observation), as
-        SB3 does (its issue #633)."""
-        for i, done in enumerate(dones):
-            info = infos[i]
-            if done and info.get("terminal_observation") is not None \
-                    and info.get("TimeLimit.truncated", False):
-                terminal = self.policy.obs_to_tensor(info["terminal_observation"])[0]
-                with th.no_grad():
-                    rewards[i] += self.gamma * self.policy.predict_values(terminal)[0]

@@ -47,6 +47,18 @@ _N = SCREEN_SIZE
 _COARSE = 8
 
 
+def sample(logits: torch.Tensor) -> torch.Tensor:
+    """One index per row, drawn with probability ``softmax(logits)`` by inverting the CDF: one
+    uniform number a row (``torch.distributions.Categorical`` draws one exponential per entry,
+    1,024 a point map, and took a quarter of a policy call at 8 games: BENCHMARKS.md,
+    "Pipelined rollouts"). An entry of probability 0 (a masked function) is never drawn."""
+    cdf = F.softmax(logits, dim=1).cumsum(dim=1)
+    u = torch.rand(len(cdf), 1, device=cdf.device, dtype=cdf.dtype) * cdf[:, -1:]
+    # right=True: the first entry whose cumulative probability exceeds u, so one that adds
+    # nothing to the sum (probability 0) is never it; u < the total keeps it in range.
+    return torch.searchsorted(cdf, u, right=True).squeeze(1).clamp(max=cdf.shape[1] - 1)
+
+
 class PointDistribution:
     """The joint distribution of ``(function, x, y)`` (see the module docstring), with
     sb3-contrib's masked-distribution methods."""
@@ -115,8 +127,8 @@ class PointDistribution:
             cell = self._point_map(f).argmax(1)
             dx = dy = torch.full_like(cell, c // 2)
         else:
-            f = torch.distributions.Categorical(logits=self.function_logits).sample()
-            cell = torch.distributions.Categorical(logits=self._point_map(f)).sample()
+            f = sample(self.function_logits)
+            cell = sample(self._point_map(f))
             dx, dy = (torch.randint(c, cell.shape, device=cell.device) for _ in range(2))
         x = (cell % self.side) * c + dx
         y = (cell // self.side) * c + dy

@@ -6,7 +6,7 @@ steps while the learner waits, then the reward is scored for every game while th
 hold them, :func:`~sc2data.rl.vector.spans`) and takes them in turn: while group 0's games step
 in their worker, the learner scores group 1's reward and acts for it, and so on — Sample
 Factory's double-buffered sampling. The learner's work and the games' then overlap instead of
-adding up (BENCHMARKS.md, "RL at speed").
+adding up (BENCHMARKS.md, "Pipelined rollouts").
 
 The data are what lockstep collects: every decision of a rollout is taken by that rollout's
 policy, a rollout has the same decisions, and the buffer, the callback and the update see one

@@ -388,6 +388,8 @@ class BuildMarinesVecEnv(VecEnv):
     # -- VecEnv ----------------------------------------------------------------------------------
 
     def reset(self) -> dict[str, np.ndarray]:
+        if self._inflight:  # their replies would be read as the reset's
+            raise RuntimeError("reset while games are stepping: wait for them first")
         self._send("reset", self._per_worker(self._seeds))
         if self._local is None:
             self._collect()

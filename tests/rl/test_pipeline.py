@@ -120,6 +120,8 @@ def test_parts_are_waited_for_in_the_order_sent() -> None:
             vec.step_async_rows(lo, hi, np.zeros(hi - lo, dtype=np.int64))
         with pytest.raises(RuntimeError, match="order"):
             vec.step_wait_rows(2, 3)
+        with pytest.raises(RuntimeError, match="stepping"):
+            vec.reset()
         for lo, hi in spans(3, 2):
             obs, rewards, dones, infos = vec.step_wait_rows(lo, hi)
             assert len(rewards) == len(dones) == len(infos) == hi - lo

@@ -1,7 +1,9 @@
 """Compare groups of runs as the field reports them (Agarwal et al. 2021, ``rliable``).
 
-A *group* is the runs that differ only by ``--seed``: the same action space, reward, narration
-file, shaping and every other setting of ``config.json``. A run's *final score* is its mean
+A *group* is the runs that differ only by the settings that pick their random draws
+(:data:`DRAWS`: ``--seed``, and ``--env-groups``, which orders the same decisions' draws
+otherwise, :mod:`sc2data.rl.pipeline`): the same action space, reward, narration file, shaping
+and every other setting of ``config.json``. A run's *final score* is its mean
 marines per evaluation episode (``RUN/eval.json``, :mod:`sc2data.rl.evaluate`), sampled play
 and argmax play apart. Per group, over its runs:
 
@@ -177,15 +179,20 @@ def load_run(run: Path) -> RunScores:
                      curve)
 
 
+DRAWS: tuple[str, ...] = ("seed", "env_groups")
+"""Settings that choose a run's random draws, not what it learns: runs that differ only by them
+are samples of one group."""
+
+
 def group_runs(runs: Sequence[RunScores]) -> dict[str, list[RunScores]]:
-    """Runs by group (every setting but the seed), named ``space, reward (narration)[,
+    """Runs by group (every setting but :data:`DRAWS`), named ``space, reward (narration)[,
     potential]`` and, where that name is shared by several groups, ``[k=v, …]`` of the settings
     that tell those apart."""
     from sc2data.rl.evaluate import _label
 
     keyed: dict[tuple[tuple[str, str], ...], list[RunScores]] = {}
     for r in runs:
-        key = tuple(sorted((k, repr(v)) for k, v in r.config.items() if k != "seed"))
+        key = tuple(sorted((k, repr(v)) for k, v in r.config.items() if k not in DRAWS))
         keyed.setdefault(key, []).append(r)
     by_label: dict[str, list[list[RunScores]]] = {}
     for members in keyed.values():
@@ -193,7 +200,7 @@ def group_runs(runs: Sequence[RunScores]) -> dict[str, list[RunScores]]:
     groups: dict[str, list[RunScores]] = {}
     for label, clash in by_label.items():
         configs = [_flat(m[0].config) for m in clash]
-        varying = sorted(k for k in set().union(*configs) if k != "seed"
+        varying = sorted(k for k in set().union(*configs) if k not in DRAWS
                          and len({repr(c.get(k)) for c in configs}) > 1)
         for members, flat in zip(clash, configs):
             extra = ", ".join(f"{k}={_short(flat.get(k))}" for k in varying)

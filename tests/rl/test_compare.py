@@ -195,6 +195,19 @@ def test_groups_are_told_apart_by_the_settings_that_differ(
     assert "paper, narration, potential: 1 run" in text
 
 
+def test_runs_pipelined_or_in_lockstep_are_one_group(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--env-groups`` only orders the same decisions' random draws: runs of either are seeds
+    of one group; a setting that changes learning still tells groups apart."""
+    a = fake_run(tmp_path / "a", [1, 1], action_space="paper", env_groups=1, seed=0)
+    b = fake_run(tmp_path / "b", [2, 2], action_space="paper", env_groups=2, seed=1)
+    c = fake_run(tmp_path / "c", [2, 2], action_space="paper", env_groups=2, seed=2, epochs=2)
+    code, text, err = run_cli(["rl", "compare", a, b, c, "--reps", "50"], capsys)
+    assert code == 0, err
+    assert "paper, sparse [epochs=4]: 2 runs" in text
+    assert "paper, sparse [epochs=2]: 1 run" in text
+
+
 def test_groups_of_other_inputs_name_the_digests_that_differ(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Two MEMs: the label names the MEM and its digest (12 hex digits), not the narration's,

@@ -9,17 +9,10 @@ from pathlib import Path
 import pytest
 
 from tests.cli import assert_one_line_error, run_cli
-from tests.mem_helpers import tiny_pairset, train_tiny
 
 TINY = ["--steps", "96", "--envs", "1", "--rollout", "32", "--batch-size", "32",
         "--episode-steps", "40",
         "--checkpoint-every", "64", "--no-progress"]
-
-
-@pytest.fixture(scope="module")
-def mem_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    root = tmp_path_factory.mktemp("mem")
-    return train_tiny(tiny_pairset(root / "pairs"), root / "run", epochs=1)
 
 
 def test_train_resume_evaluate_plot(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -16,16 +16,9 @@ from sc2data.rl.pipeline import PipelinedPPO
 from sc2data.rl.train import RLConfig, check_config, make_vec_env, new_model
 from sc2data.rl.vector import BuildMarinesVecEnv, GameConfig, spans
 from sc2data.schema import Schema, StackBatch
-from tests.mem_helpers import tiny_pairset, train_tiny
 
 CFG = dict(out="unused", action_space="paper", reward="narration", threshold=2.0, envs=5,
            rollout=40, batch_size=40, episode_steps=15, seed=2, threads=1)
-
-
-@pytest.fixture(scope="module")
-def mem_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    root = tmp_path_factory.mktemp("mem")
-    return train_tiny(tiny_pairset(root / "pairs"), root / "run", epochs=1)
 
 
 def _rollout(mem: Path, groups: int, processes: int, replay: np.ndarray | None = None,

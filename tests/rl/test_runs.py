@@ -13,16 +13,9 @@ import pytest
 from sc2data.ground.files import FolderLock
 from sc2data.rl import runs
 from tests.cli import assert_one_line_error, run_cli
-from tests.mem_helpers import tiny_pairset, train_tiny
 
 TINY = ["--steps", "64", "--envs", "2", "--rollout", "16", "--batch-size", "32",
         "--episode-steps", "20", "--checkpoint-every", "32", "--no-progress"]
-
-
-@pytest.fixture(scope="module")
-def mem_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    root = tmp_path_factory.mktemp("mem")
-    return train_tiny(tiny_pairset(root / "pairs"), root / "run", epochs=1)
 
 
 @pytest.fixture(scope="module")

@@ -21,16 +21,9 @@ from sc2data.rl.batched import make_shaping
 from sc2data.rl.envs import PAPER_FUNCTIONS
 from sc2data.rl.train import RLConfig, check_config, make_env, make_vec_env, policy_kwargs, train
 from sc2data.rl.vector import BuildMarinesVecEnv, BuildMarinesVectorEnv, GameConfig
-from tests.mem_helpers import tiny_pairset, train_tiny
 
 STEPS = 60
 """pysc2 steps per episode: several episodes end within a test."""
-
-
-@pytest.fixture(scope="module")
-def mem_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    root = tmp_path_factory.mktemp("mem")
-    return train_tiny(tiny_pairset(root / "pairs"), root / "run", epochs=1)
 
 
 def _masked_actions(masks: np.ndarray, space: str, rng: np.random.Generator) -> np.ndarray:

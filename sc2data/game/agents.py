@@ -9,6 +9,8 @@ Every agent reads only what pysc2 observes (screen layers, ``player``, ``single_
 * ``reduced-random``: the paper's random agent over a reduced action set — each time its previous
   macro action ends it picks one uniformly (train SCV, build a depot, build a barracks, train a
   marine, send idle workers to mine, no-op) and plays it out as pysc2 selection and command calls.
+* ``macro-rules``: the scripted agent's rules played with the reduced-random agent's six macros
+  (random sites, no kills): what the macro space of ``sc2data.rl`` allows a policy.
 * ``scripted``: a build order — SCVs, depots ahead of supply, several barracks, marines nonstop,
   idle SCVs back to mining, and, near the supply ceiling, its own marines killed with Attack_screen
   (as the published scripted agent does) to make room for more.
@@ -253,6 +255,80 @@ class ReducedRandomAgent(MacroAgent):
         return macro
 
 
+def macro_feasible(v: ScreenView) -> np.ndarray:
+    """``(6,)`` bool, in :attr:`ReducedRandomAgent.MACROS` order: which macros the observation
+    says can start now (the macro space's action mask, :mod:`sc2data.rl.envs`)."""
+    free = int(v.player[_P.food_cap]) - int(v.player[_P.food_used])
+    cc = v.own(units.Terran.CommandCenter)
+    has_scv = bool(v.own(units.Terran.SCV).any())
+    n_cc = max(1, len(v.blobs(cc)))
+    depot_done = int(v.player[_P.food_cap]) > 15 * n_cc  # a finished depot raises the cap
+    ok = {
+        "train_scv": bool(cc.any()) and free >= 1,
+        "build_supply_depot": has_scv and bool(v.placements(2).any()),
+        "build_barracks": has_scv and depot_done and bool(v.placements(3).any()),
+        "train_marine": bool(v.own(units.Terran.Barracks).any()) and free >= 1,
+        "gather": int(v.player[_P.idle_worker_count]) > 0,
+        "no_op": True,
+    }
+    return np.array([ok[name] for name in ReducedRandomAgent.MACROS], dtype=bool)
+
+
+class MacroRulesAgent(ReducedRandomAgent):
+    """The scripted agent's rules played in the macro space: what its six macros allow.
+
+    Each time its previous macro ends it picks one of :attr:`ReducedRandomAgent.MACROS` that
+    :func:`macro_feasible` allows — idle SCVs back to mining, a depot when free supply runs low
+    and none is being built, SCVs up to ``scvs``, barracks up to ``barracks``, marines, else
+    no-op — and plays it out as the macro space does (:meth:`ReducedRandomAgent.macro`: which
+    SCV, where, which barracks drawn at random; minerals waited for). Unlike ``scripted`` it
+    cannot place buildings where it likes or kill its own marines, so the buildings that fit on
+    the screen cap its supply (BENCHMARKS.md, "The macro space's ceiling").
+    """
+
+    def __init__(self, seed: int, *, scvs: int = 20, barracks: int = 5) -> None:
+        super().__init__(seed)
+        self.scvs = scvs
+        self.barracks = barracks
+        self._last: dict[str, int] = {}
+
+    def reset(self) -> None:
+        super().reset()
+        self._last = {}
+
+    GAPS: dict[str, int] = {"build_supply_depot": 25, "train_scv": 34, "build_barracks": 25}
+    """pysc2 steps before a macro is chosen again: a depot or barracks shows only once its SCV
+    has walked to the site; an SCV takes 272 game loops (34 steps), one queued at a time; a
+    marine (400 loops, 50 steps) is ordered every ``50 // barracks`` steps."""
+
+    def next_macro(self) -> Macro:
+        v = self._v()
+        ok = dict(zip(self.MACROS, macro_feasible(v), strict=True))
+        used, cap = int(v.player[_P.food_used]), int(v.player[_P.food_cap])
+        rax = len(v.blobs(v.own(units.Terran.Barracks)))
+        depots = len(v.blobs(v.own(units.Terran.SupplyDepot, units.Terran.SupplyDepotLowered)))
+        depots_building = depots - max(0, cap - 15) // 8
+        wants = (
+            ("gather", True),
+            ("build_supply_depot", cap < 200 and cap - used <= 4 + 2 * rax
+             and depots_building <= 0),
+            ("train_scv", int(v.player[_P.food_workers]) < self.scvs),
+            ("build_barracks", rax < self.barracks),
+            ("train_marine", True),
+        )
+        gaps = {**self.GAPS, "train_marine": 50 // max(1, rax)}
+        for name, want in wants:
+            if want and ok[name] and self._ready(name, gaps.get(name, 0)):
+                self._last[name] = self.steps
+                macro = self.macro(name)
+                cost = self.COST.get(name, 0)
+                return self.save_up(cost, macro, self.PATIENCE) if cost else macro
+        return self.no_op()
+
+    def _ready(self, name: str, gap: int) -> bool:
+        return self.steps - self._last.get(name, -gap) >= gap
+
+
 class ScriptedAgent(MacroAgent):
     """A build order: SCVs, depots ahead of supply, several barracks, marines nonstop."""
 
@@ -360,6 +436,7 @@ AGENTS: dict[str, Callable[[int], base_agent.BaseAgent]] = {
     "random": SeededRandomAgent,
     "reduced-random": ReducedRandomAgent,
     "scripted": ScriptedAgent,
+    "macro-rules": MacroRulesAgent,
 }
 """Agent factories by name; each takes the seed."""
 

@@ -64,8 +64,8 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from sc2data._pysc2 import actions, features, units
-from sc2data.game.agents import ReducedRandomAgent
+from sc2data._pysc2 import actions
+from sc2data.game.agents import ReducedRandomAgent, macro_feasible  # noqa: F401  (re-exported)
 from sc2data.game.env import make_env
 from sc2data.game.screen import ScreenView
 from sc2data.ground.errors import Sc2DataError
@@ -81,8 +81,6 @@ RECT_HALF = 4
 """``select_rect`` selects the box of ±4 pixels around the chosen point (one point, not two)."""
 
 _F = actions.FUNCTIONS
-_P = features.Player
-_T = units.Terran
 NO_OP = _F.no_op()
 _PAPER_IDS = tuple(int(_F[name].id) for name in PAPER_FUNCTIONS)
 
@@ -110,24 +108,6 @@ def paper_call(index: int, x: int, y: int) -> actions.FunctionCall:
         else:
             args.append(_FIXED_ARGS[arg.name])
     return actions.FunctionCall(func.id, args)
-
-
-def macro_feasible(v: ScreenView) -> np.ndarray:
-    """``(6,)`` bool, in :data:`MACROS` order: which macros the observation says can start now."""
-    free = int(v.player[_P.food_cap]) - int(v.player[_P.food_used])
-    cc = v.own(_T.CommandCenter)
-    has_scv = bool(v.own(_T.SCV).any())
-    n_cc = max(1, len(v.blobs(cc)))
-    depot_done = int(v.player[_P.food_cap]) > 15 * n_cc  # a finished depot raises the cap
-    ok = {
-        "train_scv": bool(cc.any()) and free >= 1,
-        "build_supply_depot": has_scv and bool(v.placements(2).any()),
-        "build_barracks": has_scv and depot_done and bool(v.placements(3).any()),
-        "train_marine": bool(v.own(_T.Barracks).any()) and free >= 1,
-        "gather": int(v.player[_P.idle_worker_count]) > 0,
-        "no_op": True,
-    }
-    return np.array([ok[name] for name in MACROS], dtype=bool)
 
 
 class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):

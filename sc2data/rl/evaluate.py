@@ -25,7 +25,7 @@ one with the real game) and give the same figures however they are spread.
 Reference agents (:func:`baselines`, ``sc2data rl baselines --out DIR``) are played once on the
 same seeds and stored in ``DIR/baselines.json``: the masked uniform policy of each action space
 (uniform over the allowed functions, then over the screen; uniform over the feasible macros),
-and the reduced-random and scripted agents of :mod:`sc2data.game.agents`.
+and the reduced-random, macro-rules and scripted agents of :mod:`sc2data.game.agents`.
 """
 
 from __future__ import annotations
@@ -78,8 +78,10 @@ BASELINES_SHAPE: Shape = {"episodes": int, "seeds": [int], "episode_steps": (int
 
 REFERENCE_AGENTS: dict[str, str] = {
     "uniform-paper": "paper", "uniform-macro": "macro",
-    "reduced-random": "macro", "scripted": "macro"}
-"""Reference agents and the action space each plays in."""
+    "reduced-random": "macro", "macro-rules": "macro", "scripted": "macro"}
+"""Reference agents and the action space each plays in (``macro-rules``: the scripted agent's
+rules within the six macros, what that space allows; ``scripted`` places its buildings and kills
+its own marines, which no macro does)."""
 
 # -- the episodes -----------------------------------------------------------------------------
 
@@ -478,9 +480,9 @@ def seed_band(curves: Sequence[tuple[np.ndarray, np.ndarray]]
 
 def reference_lines(ax: Any, record: dict[str, Any], spaces: set[str]) -> None:
     """Dashed horizontal lines at the reference agents' mean (those of ``spaces``, and the
-    reduced-random and scripted agents, which play the macro space's actions by themselves)."""
+    reduced-random, macro-rules and scripted agents, which play macros by themselves)."""
     styles = {"uniform-paper": ":", "uniform-macro": ":", "reduced-random": "-.",
-              "scripted": "--"}
+              "macro-rules": (0, (5, 1, 1, 1)), "scripted": "--"}
     for name, a in record["agents"].items():
         if name.startswith("uniform-") and a["space"] not in spaces:
             continue

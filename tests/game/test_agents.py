@@ -15,6 +15,7 @@ from pysc2.env import mock_sc2_env  # isort: skip
 from pysc2.lib import named_array  # isort: skip
 from sc2data.game.agents import (
     AGENTS,
+    MacroRulesAgent,
     ReducedRandomAgent,
     ScriptedAgent,
     make_agent,
@@ -69,7 +70,7 @@ def _timestep(*, selected: int = 0, available: tuple[int, ...] = (0, 1, 2, 3, 4)
 # --- registry and seeding -----------------------------------------------------------------
 
 def test_registry_makes_every_agent_as_a_pysc2_base_agent() -> None:
-    assert set(AGENTS) == {"random", "reduced-random", "scripted"}
+    assert set(AGENTS) == {"random", "reduced-random", "macro-rules", "scripted"}
     for name in AGENTS:
         assert isinstance(make_agent(name, seed=0), base_agent.BaseAgent)
     assert isinstance(make_agent("random", seed=0), random_agent.RandomAgent)
@@ -237,3 +238,33 @@ def test_scripted_agent_kills_its_own_marines_at_its_supply_ceiling() -> None:
     assert max(caps) < 60 + 8
     assert events["died", T.Marine] > 10
     assert int(frames[-1].observation["score_cumulative"][0]) >= 60
+
+
+def test_macro_rules_agent_sends_idle_workers_first_then_a_depot_when_supply_runs_low() -> None:
+    agent = MacroRulesAgent(0)
+    agent.reset()
+    call = agent.step(_timestep(idle=2, food=(14, 15), available=(0, 1, 2, 3, 4, 6)))
+    assert call.function == _F.select_idle_worker.id  # the gather macro
+    agent = MacroRulesAgent(0)
+    agent.reset()
+    ts = _timestep(food=(14, 15), available=(0, 1, 2, 3, 4))
+    call = agent.step(ts)
+    x, y = call.arguments[1]
+    assert call.function == _F.select_point.id
+    assert ScreenView(ts).own(T.SCV)[y, x], "a depot starts by selecting an SCV, not the CC"
+    ts = _timestep(food=(12, 23), available=(0, 1, 2, 3, 4))  # 11 free: an SCV instead
+    agent = MacroRulesAgent(0)
+    agent.reset()
+    call = agent.step(ts)
+    assert call.function == _F.select_point.id and ScreenView(ts).own(T.CommandCenter)[
+        call.arguments[1][1], call.arguments[1][0]]
+
+
+def test_macro_rules_agent_fills_its_supply_ceiling_without_killing_a_marine() -> None:
+    frames, events = _episode("macro-rules", 0)
+    last = frames[-1].observation["player"]
+    marines = int(frames[-1].observation["score_cumulative"][0])
+    assert events["died", T.Marine] == 0 and 1 <= events["completed", T.Barracks] <= 5
+    # the buildings that fit on the screen cap its supply: it ends supply-blocked below 200
+    assert last[_P.food_used] == last[_P.food_cap] < 200
+    assert marines == events["completed", T.Marine] >= 60, marines

@@ -108,7 +108,7 @@ def test_cli_render_unknown_agent_is_one_line(tmp_path: Path,
     assert _run("render", "--agent", "grandmaster", "--out", str(tmp_path / "f.png")) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["sc2data: error: unknown agent 'grandmaster'; choose one of: random, "
-                   "reduced-random, scripted, policy:RUN"]
+                   "reduced-random, scripted, macro-rules, policy:RUN"]
 
 
 def test_unwritable_output_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -20,7 +20,12 @@ Counting. One gymnasium step is one *decision*. A paper decision is exactly one 
 game loops at step_mul 8). A macro decision takes as many pysc2 steps as it waits and sends
 calls — the waiting for minerals, then 1 to 2 calls (select, then command) — and at least one: a
 macro that sends nothing (its first call is unavailable) plays one ``no_op`` so that time always
-advances. ``info["env_steps"]`` says how many pysc2 steps the decision took and
+advances. With ``merge_waits`` a macro decision also plays on the ``no_op`` steps that follow
+it while ``no_op`` is the only macro allowed — once the screen has no room for another depot and
+the supply is used, every macro-space agent waits out its episode so (BENCHMARKS.md, "The macro
+space's ceiling") — up to :data:`MAX_DECISION_STEPS` steps in all: the policy is asked only when
+it has a choice, and the game plays exactly as it would have (the only answer was ``no_op``).
+``info["env_steps"]`` says how many pysc2 steps the decision took and
 ``info["game_loop"]`` the game time after it; learning curves are drawn against pysc2 steps so
 that both spaces are compared on the same clock. The reward is the sum of the game's rewards
 (+1 per marine made) over those pysc2 steps; ``info["game_reward"]`` carries the same number.
@@ -77,6 +82,10 @@ ACTION_SPACES: tuple[str, ...] = ("macro", "paper")
 MACROS: tuple[str, ...] = ReducedRandomAgent.MACROS
 """The macro actions, in action-index order (the reduced-random agent's set)."""
 
+MAX_DECISION_STEPS = ReducedRandomAgent.PATIENCE + 4
+"""Most pysc2 steps one macro decision takes: the wait for minerals, then its calls (and, with
+``merge_waits``, the forced waits after them, up to this many steps in all)."""
+
 RECT_HALF = 4
 """``select_rect`` selects the box of ±4 pixels around the chosen point (one point, not two)."""
 
@@ -118,7 +127,8 @@ class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
     def __init__(self, action_space: str = "macro", *, backend: str = "sim",
                  layers: str = "paper", game_loops: int | None = None,
                  step_mul: int = STEP_MUL, obs: str | ObsConfig = "stored",
-                 draw: Iterable[str] | None = None, **env_kwargs: Any) -> None:
+                 draw: Iterable[str] | None = None, merge_waits: bool = False,
+                 **env_kwargs: Any) -> None:
         if action_space not in ACTION_SPACES:
             raise Sc2DataError(f"unknown action space {action_space!r}; choose one of: "
                                f"{', '.join(ACTION_SPACES)}")
@@ -126,6 +136,7 @@ class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
         self.observer = Observer(obs_cfg)
         self.schema = self.observer.schema
         self.kind = action_space
+        self.merge_waits = merge_waits and action_space == "macro"
         self.backend = backend
         self.step_mul = step_mul
         self._env_kwargs = dict(env_kwargs)
@@ -188,6 +199,8 @@ class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
             reward += self._send(paper_call(fn, x, y))
         else:
             reward += self._play_macro(name)
+        if self.merge_waits:
+            reward += self._wait_while_forced()
         info = {"game_reward": reward, "env_steps": len(self.frames) - 1, "invalid": invalid,
                 "game_loop": self._loop(), "marines": self._marines(), "action": name}
         return self._obs(), reward, bool(self._ts.last()), False, info
@@ -238,6 +251,16 @@ class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
             if self._ts.last():
                 break
         if len(self.frames) == 1:
+            reward += self._send(NO_OP)
+        return reward
+
+    def _wait_while_forced(self) -> float:
+        """``no_op`` while it is the only macro allowed (no free supply and no room for a depot,
+        say), up to :data:`MAX_DECISION_STEPS` pysc2 steps for the decision: the policy is asked
+        again only when it has a choice, or after that many steps, or at the episode's end."""
+        reward = 0.0
+        while (not self._ts.last() and len(self.frames) - 1 < MAX_DECISION_STEPS
+               and macro_feasible(self._view).sum() == 1):  # type: ignore[arg-type]
             reward += self._send(NO_OP)
         return reward
 

@@ -265,7 +265,7 @@ def _load_player(run: str) -> None:
     torch.set_num_threads(1)
     cfg = load_config(Path(run))
     env = BuildMarinesGym(cfg.action_space, backend=cfg.backend, obs=cfg.obs_config(),
-                          game_loops=game_loops(cfg))
+                          game_loops=game_loops(cfg), merge_waits=cfg.merge_waits)
     try:
         _PLAYER = (run, load_model(Path(run), env), env)
     except BaseException:

@@ -171,6 +171,11 @@ class RLConfig:
     # Approximate KL; 0 is kept as None (never).
     smdp: bool = True
     """Discount a decision of k pysc2 steps by gamma^k."""
+    merge_waits: bool = True
+    """Macro space: while no_op is the only macro allowed, wait on within the decision (up to
+    64 pysc2 steps), so the policy is asked only when it has a choice."""
+    # sc2data.rl.envs: the game plays exactly as before; decisions (and --steps) count only
+    # choices. Most forced waits come after the macro space's supply ceiling (BENCHMARKS.md).
     # The same as gamma in the paper space, where every decision is one step
     # (sc2data.rl.smdp).
     tensorboard: bool = False
@@ -183,7 +188,7 @@ class RLConfig:
         "obs": "stored", "obs_size": 64, "minimap": False, "policy": "independent", "gamma": 0.99,
         "gae_lambda": 0.95, "epochs": 4, "learning_rate": 3e-4, "ent_coef": 0.01,
         "ent_coef_final": None, "normalize_advantage": True, "target_kl": None, "smdp": False,
-        "shaping": "event", "env_groups": 1}
+        "shaping": "event", "env_groups": 1, "merge_waits": False}
     """Settings added since runs were first written, as those runs had them: a run folder whose
     ``config.json`` lacks one was trained so."""
 
@@ -317,7 +322,7 @@ def make_env(cfg: RLConfig, scorer: Any = None, narration: Any = None) -> Any:
     from sc2data.rl.rewards import wrap_reward
 
     env = BuildMarinesGym(cfg.action_space, backend=cfg.backend, obs=cfg.obs_config(),
-                          game_loops=game_loops(cfg))
+                          game_loops=game_loops(cfg), merge_waits=cfg.merge_waits)
     if cfg.reward == "narration" and scorer is None:
         narration, scorer = check_config(cfg)
     return wrap_reward(env, cfg.reward, scorer=scorer, narration=narration, bonus=cfg.bonus,
@@ -342,7 +347,8 @@ def make_vec_env(cfg: RLConfig, scorer: Any = None, narration: Any = None) -> An
     shaping = make_shaping(cfg.reward, scorer=scorer, narration=narration, bonus=cfg.bonus,
                            threshold=cfg.threshold, patience=cfg.patience, shaping=cfg.shaping,
                            gamma=cfg.gamma, smdp=cfg.smdp and cfg.action_space == "macro")
-    game = GameConfig(cfg.action_space, cfg.backend, cfg.obs_config(), game_loops(cfg))
+    game = GameConfig(cfg.action_space, cfg.backend, cfg.obs_config(), game_loops(cfg),
+                      merge_waits=cfg.merge_waits)
     return BuildMarinesVecEnv(game, cfg.envs, processes=cfg.processes, shaping=shaping)
 
 

@@ -26,6 +26,7 @@ once and its last observation is ``info["terminal_observation"]``; the same seed
 
 from __future__ import annotations
 
+import dataclasses
 import multiprocessing as mp
 import os
 import signal
@@ -41,16 +42,12 @@ import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
-from sc2data.game.agents import ReducedRandomAgent
 from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.files import one_line
 from sc2data.rl.arena import Arena, Field
-from sc2data.rl.envs import BuildMarinesGym
+from sc2data.rl.envs import MAX_DECISION_STEPS, BuildMarinesGym
 from sc2data.rl.obs import ObsConfig
 from sc2data.schema import Schema
-
-MAX_MACRO_STEPS = ReducedRandomAgent.PATIENCE + 4
-"""Most pysc2 steps one macro decision can take: the wait for minerals, then its calls."""
 
 
 @dataclass(frozen=True)
@@ -64,16 +61,19 @@ class GameConfig:
     """Episode length in game loops (simulator only); None: the map's 14,400."""
     frames: Schema | None = None
     """The layers and vectors of each decision's pysc2 frames kept for the reward (None: none)."""
+    merge_waits: bool = False
+    """Macro space: forced ``no_op`` steps join the decision before them (``BuildMarinesGym``)."""
 
     def make(self) -> BuildMarinesGym:
         draw = None if self.frames is None else frozenset(l.key for l in self.frames.layers)
         if self.frames is None and self.backend == "sim":
             draw = frozenset()
         return BuildMarinesGym(self.action_space, backend=self.backend, obs=self.obs,
-                               game_loops=self.game_loops, draw=draw)
+                               game_loops=self.game_loops, draw=draw,
+                               merge_waits=self.merge_waits)
 
     def max_steps(self) -> int:
-        return 1 if self.action_space == "paper" else MAX_MACRO_STEPS
+        return 1 if self.action_space == "paper" else MAX_DECISION_STEPS
 
 
 def layout(cfg: GameConfig, n: int, env: BuildMarinesGym) -> list[Field]:
@@ -278,8 +278,7 @@ class BuildMarinesVecEnv(VecEnv):
         if n < 1:
             raise Sc2DataError("--envs must be at least 1")
         if shaping is not None and cfg.frames is None and shaping.schema is not None:
-            cfg = GameConfig(cfg.action_space, cfg.backend, cfg.obs, cfg.game_loops,
-                             shaping.schema)
+            cfg = dataclasses.replace(cfg, frames=shaping.schema)
         self.game_weight = float(getattr(shaping, "game_weight", 1.0))
         self.cfg, self.shaping = cfg, shaping
         k = default_processes(n) if processes is None else int(processes)

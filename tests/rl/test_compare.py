@@ -268,6 +268,17 @@ def test_runs_written_before_shaping_read_as_event_shaping(tmp_path: Path) -> No
     assert load_config(run).shaping == "event"
 
 
+def test_runs_written_before_merged_waits_read_as_asking_at_every_step(tmp_path: Path) -> None:
+    from sc2data.rl.train import load_config
+
+    run = fake_run(tmp_path / "old", [1, 2], action_space="macro")
+    assert load_config(run).merge_waits is True  # new runs merge the forced waits
+    config = json.loads((run / "config.json").read_text())
+    del config["merge_waits"]
+    _write_json(run / "config.json", config)
+    assert load_config(run).merge_waits is False
+
+
 def test_shaping_defaults_to_the_experiments_choice_per_reward(tmp_path: Path) -> None:
     """Potential-based for the rules reward (paid per firing it was farmed), per match for
     the narration's; what is asked is kept, and a config records the shaping it ran."""

@@ -12,7 +12,13 @@ from gymnasium.utils.env_checker import check_env
 import sc2data.rl  # noqa: F401  (registers the ids)
 from sc2data._pysc2 import actions, features, units
 from sc2data.ground.errors import Sc2DataError
-from sc2data.rl.envs import MACROS, PAPER_FUNCTIONS, BuildMarinesGym, paper_call
+from sc2data.rl.envs import (
+    MACROS,
+    MAX_DECISION_STEPS,
+    PAPER_FUNCTIONS,
+    BuildMarinesGym,
+    paper_call,
+)
 from sc2data.schema import Schema
 
 LOOPS = 8 * 120
@@ -132,3 +138,41 @@ def test_bad_settings_are_errors() -> None:
         BuildMarinesGym("full")
     with pytest.raises(Sc2DataError, match="unknown layer set"):
         BuildMarinesGym("macro", layers="tiny")
+
+
+def _first_allowed(mask: np.ndarray) -> int:
+    """A choice that depends on the mask alone: the first macro allowed after ``no_op``'s turn
+    (so that two envs asked in the same state answer alike)."""
+    order = [MACROS.index(m) for m in ("gather", "build_barracks", "train_marine",
+                                       "build_supply_depot", "train_scv", "no_op")]
+    return next(a for a in order if mask[a])
+
+
+def test_merged_waits_play_the_same_game_asking_only_when_there_is_a_choice() -> None:
+    """``merge_waits``: the forced ``no_op`` steps after the supply ceiling join the decision
+    before them; the game is played step for step as without them."""
+    played = {}
+    for merge in (False, True):
+        env = BuildMarinesGym("macro", obs="compact", merge_waits=merge)
+        env.reset(seed=5)
+        decisions, steps, reward, frames, done = 0, 0, 0.0, [], False
+        forced_ends = []
+        while not done:
+            _, r, done, _, info = env.step(_first_allowed(env.action_masks()))
+            decisions += 1
+            steps += info["env_steps"]
+            reward += r
+            frames += [int(f["game_loop"][0]) for f in env.frames[1:]]
+            forced_ends.append(env.action_masks().sum() == 1 and not done
+                               and info["env_steps"] < MAX_DECISION_STEPS)
+        played[merge] = (decisions, steps, reward, info["marines"], frames, any(forced_ends))
+        env.close()
+    (d0, s0, r0, m0, f0, forced0), (d1, s1, r1, m1, f1, forced1) = played[False], played[True]
+    assert (s1, r1, m1, f1) == (s0, r0, m0, f0) and s0 == 1800 and m0 > 0
+    assert forced0 and not forced1, "unmerged decisions end where only no_op is allowed"
+    assert d1 < 0.8 * d0, (d1, d0)
+
+
+def test_merged_waits_change_nothing_in_the_paper_space() -> None:
+    env = BuildMarinesGym("paper", game_loops=LOOPS, merge_waits=True)
+    assert not env.merge_waits

@@ -171,13 +171,13 @@ class RLConfig:
     # Approximate KL; 0 is kept as None (never).
     smdp: bool = True
     """Discount a decision of k pysc2 steps by gamma^k."""
+    # The same as gamma in the paper space, where every decision is one step
+    # (sc2data.rl.smdp).
     merge_waits: bool = True
     """Macro space: while no_op is the only macro allowed, wait on within the decision (up to
     64 pysc2 steps), so the policy is asked only when it has a choice."""
     # sc2data.rl.envs: the game plays exactly as before; decisions (and --steps) count only
     # choices. Most forced waits come after the macro space's supply ceiling (BENCHMARKS.md).
-    # The same as gamma in the paper space, where every decision is one step
-    # (sc2data.rl.smdp).
     tensorboard: bool = False
     """Also write SB3's log as TensorBoard events (RUN/logs/<session>/; needs tensorboard)."""
     progress: bool | None = None

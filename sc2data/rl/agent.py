@@ -97,7 +97,10 @@ class PolicyAgent(base_agent.BaseAgent):
         self.expander.view = view
         for _ in range(2):  # the running macro's next call, or a new decision on this view
             if self._macro is None:
-                name = MACROS[int(self._decide(obs, macro_feasible(view)))]
+                mask = macro_feasible(view)
+                if self.cfg.merge_waits and mask.sum() == 1:  # forced: the env asks no policy
+                    return actions.FUNCTIONS.no_op()
+                name = MACROS[int(self._decide(obs, mask))]
                 macro = self.expander.macro(name)
                 cost = self.expander.COST.get(name, 0)
                 self._macro = (self.expander.save_up(cost, macro, self.expander.PATIENCE)

@@ -9,6 +9,7 @@ baselines``' seeds) and prints, per agent, the marines, the supply at the end an
 the ceiling was reached: the first game loop with no free supply and no site for a depot.
 
     .venv/bin/python benchmarks/macro_ceiling.py --episodes 10 --out ceiling.json
+    .venv/bin/python benchmarks/macro_ceiling.py --episodes 10 --sites far  # --macro-sites far
 
 ``uniform-macro`` is the masked uniform policy over the six macros, ``reduced-random`` the
 paper's random agent over the same macros, ``macro-rules`` the scripted agent's rules within
@@ -30,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from sc2data._pysc2 import features, units
-from sc2data.game.agents import make_agent, play
+from sc2data.game.agents import SITES, MacroRulesAgent, ReducedRandomAgent, make_agent, play
 from sc2data.game.env import make_env
 from sc2data.game.screen import ScreenView
 from sc2data.rl.envs import BuildMarinesGym
@@ -40,16 +41,16 @@ _P = features.Player
 AGENTS = ("uniform-macro", "reduced-random", "macro-rules", "scripted")
 
 
-def _frames(agent: str, seed: int) -> Iterator[Any]:
+def _frames(agent: str, seed: int, sites: str) -> Iterator[Any]:
     """Every pysc2 observation of one evaluation episode of ``agent``."""
-    for obs, events in _observations(agent, seed):
+    for obs, events in _observations(agent, seed, sites):
         # what ScreenView reads of a TimeStep, and what the simulator recorded in that step
         yield types.SimpleNamespace(observation=obs, events=events)
 
 
-def _observations(agent: str, seed: int) -> Iterator[Any]:
+def _observations(agent: str, seed: int, sites: str) -> Iterator[Any]:
     if agent == "uniform-macro":
-        env = BuildMarinesGym("macro", obs="compact")
+        env = BuildMarinesGym("macro", obs="compact", sites=sites)
         policy = UniformPolicy([6])
         policy.set_random_seed(seed)
         try:
@@ -65,19 +66,21 @@ def _observations(agent: str, seed: int) -> Iterator[Any]:
         return
     env = make_env("sim", seed=game_seed(seed))
     try:
-        for ts in play(env, make_agent(agent, seed=seed)):
+        macro = {"reduced-random": ReducedRandomAgent, "macro-rules": MacroRulesAgent}
+        player = macro[agent](seed, sites=sites) if agent in macro else make_agent(agent, seed=seed)
+        for ts in play(env, player):
             yield ts.observation, tuple(env.events)
     finally:
         env.close()
 
 
-def episode(agent: str, seed: int) -> dict[str, Any]:
+def episode(agent: str, seed: int, sites: str = "random") -> dict[str, Any]:
     """Marines, the supply at the end, and the first loop at the ceiling (None: never)."""
     ceiling = None
     cap_max = 0
     ts: Any = None
     done: Counter[tuple[str, int]] = Counter()
-    for ts in _frames(agent, seed):
+    for ts in _frames(agent, seed, sites):
         done.update((e.kind, e.unit_type) for e in ts.events)
         obs = ts.observation
         player = obs["player"]
@@ -99,17 +102,19 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--episodes", type=int, default=10)
     ap.add_argument("--agents", nargs="*", default=list(AGENTS), choices=AGENTS)
+    ap.add_argument("--sites", default="random", choices=SITES,
+                    help="where the macro agents build (rl train --macro-sites)")
     ap.add_argument("--out", type=Path)
     args = ap.parse_args()
     seeds, _ = eval_seeds(args.episodes)
-    record: dict[str, Any] = {"seeds": seeds, "agents": {}}
+    record: dict[str, Any] = {"seeds": seeds, "sites": args.sites, "agents": {}}
     print("| agent | marines, mean (range) | supply cap at the end (range) | workers "
           "| depots built | barracks | marines killed | episodes at the ceiling "
           "| its first loop, median |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for agent in args.agents:
         t0 = time.perf_counter()
-        eps = [episode(agent, s) for s in seeds]
+        eps = [episode(agent, s, args.sites) for s in seeds]
         record["agents"][agent] = eps
 
         def col(key: str, e: list[dict[str, Any]] = eps) -> np.ndarray:

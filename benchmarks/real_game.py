@@ -35,7 +35,7 @@ from typing import Any
 from sc2data._pysc2 import actions, features, units  # first: it makes pysc2 importable
 
 from pysc2.agents.base_agent import BaseAgent  # isort: skip
-from sc2data.game.agents import Macro, MacroAgent, ScriptedAgent, make_agent, play
+from sc2data.game.agents import Macro, MacroAgent, far_spot, make_agent, play
 from sc2data.game.sim import BuildMarinesEnv
 from sc2data.game.sim import mapdata as md
 
@@ -258,7 +258,7 @@ class Opening(MacroAgent):
                       and used >= (14 if cap <= 15 else cap - 4))
         if need_depot and minerals >= 100:
             self._next_build = self.steps + 30
-            return self.build(_F.Build_SupplyDepot_screen, ScriptedAgent._far_spot, 2)
+            return self.build(_F.Build_SupplyDepot_screen, far_spot, 2)
         if v.player[_P.idle_worker_count] > 0:
             return self.gather()
         cc = v.centre_pixel(v.own(units.Terran.CommandCenter))
@@ -267,7 +267,7 @@ class Opening(MacroAgent):
             return self._queue(units.Terran.CommandCenter, cc, _F.Train_SCV_quick)
         if not rax and not walking and cap > 15 and used >= 16 and minerals >= 150:
             self._next_build = self.steps + 30
-            return self.build(_F.Build_Barracks_screen, ScriptedAgent._far_spot, 3)
+            return self.build(_F.Build_Barracks_screen, far_spot, 3)
         if rax and used < cap and minerals >= 50:
             return self._queue(units.Terran.Barracks, v.centre_pixel(rax[0]),
                                _F.Train_Marine_quick)

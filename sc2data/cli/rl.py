@@ -65,15 +65,19 @@ def baselines_cmd(
     episode_steps: Optional[int] = typer.Option(
         None, "--episode-steps", help="pysc2 steps per episode, as the runs were trained "
                                       "[default: 1800]."),
+    macro_sites: str = typer.Option(
+        "random", "--macro-sites", help="Where the macro agents build: random or far, as the "
+                                        "runs were trained."),
     progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",
                                             help="Progress bar [default: on a terminal]."),
 ) -> None:
     """Reference agents on the evaluation episodes: the masked uniform policy of each action
-    space, the reduced-random and the scripted agents; writes OUT/baselines.json."""
+    space, the reduced-random, macro-rules and scripted agents; writes OUT/baselines.json."""
     from sc2data.rl.evaluate import baselines, reference_summary
 
     require_rl("sc2data rl baselines")
-    for line in reference_summary(baselines(out, episodes, episode_steps, progress=progress)):
+    record = baselines(out, episodes, episode_steps, progress=progress, sites=macro_sites)
+    for line in reference_summary(record):
         typer.echo(line)
     typer.echo(f"wrote {out / 'baselines.json'}")
 

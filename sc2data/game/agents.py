@@ -214,6 +214,27 @@ def _random_spot(rng: np.random.Generator) -> Callable[[ScreenView, int], tuple[
     return lambda v, size: v.random_pixel(v.placements(size), rng)
 
 
+def far_spot(v: ScreenView, size: int) -> tuple[int, int] | None:
+    """The free spot farthest from the minerals, so buildings never block mining (and pack
+    against the screen's far edge, leaving room for more)."""
+    ok = v.placements(size)
+    if not ok.any():
+        return None
+    ys, xs = np.nonzero(ok)
+    my, mx = np.nonzero(v.minerals())
+    if len(my):
+        d = (ys - my.mean()) ** 2 + (xs - mx.mean()) ** 2
+    else:
+        d = xs.astype(float)
+    i = int(np.argmax(d))
+    return int(xs[i]), int(ys[i])
+
+
+SITES: tuple[str, ...] = ("random", "far")
+"""Where the macros build: a free site drawn at random (the paper's random agent), or the free
+site farthest from the minerals (:func:`far_spot`, the scripted agent's choice)."""
+
+
 class ReducedRandomAgent(MacroAgent):
     """The paper's random agent over a reduced set of macro actions, picked uniformly.
 
@@ -228,6 +249,13 @@ class ReducedRandomAgent(MacroAgent):
                             "train_marine": 50}
     PATIENCE = 60
 
+    def __init__(self, seed: int, *, sites: str = "random") -> None:
+        super().__init__(seed)
+        if sites not in SITES:
+            raise Sc2DataError(f"unknown sites {sites!r}; choose one of: {', '.join(SITES)}")
+        self.sites = sites
+        """Where its buildings go (:data:`SITES`)."""
+
     def next_macro(self) -> Macro:
         name = self.MACROS[int(self.rng.integers(len(self.MACROS)))]
         macro = self.macro(name)
@@ -237,17 +265,19 @@ class ReducedRandomAgent(MacroAgent):
     def macro(self, name: str) -> Macro:
         """Macro ``name`` (one of :attr:`MACROS`) played out from the current view, at once.
 
-        Random choices (which SCV builds, where, which barracks trains) come from ``self.rng``.
+        Random choices (which SCV builds, where — on random sites —, which barracks trains) come
+        from ``self.rng``.
         ``self.view`` must be set to the observation before each call is drawn, as :meth:`step`
         does; the gymnasium environments of ``sc2data.rl`` drive macros this way.
         """
         if name not in self.MACROS:
             raise Sc2DataError(f"unknown macro {name!r}; choose one of: {', '.join(self.MACROS)}")
         v = self._v()
+        site = far_spot if self.sites == "far" else _random_spot(self.rng)
         if name == "build_supply_depot":
-            macro = self.build(_F.Build_SupplyDepot_screen, _random_spot(self.rng), 2)
+            macro = self.build(_F.Build_SupplyDepot_screen, site, 2)
         elif name == "build_barracks":
-            macro = self.build(_F.Build_Barracks_screen, _random_spot(self.rng), 3)
+            macro = self.build(_F.Build_Barracks_screen, site, 3)
         elif name == "train_marine":
             macro = self.train_marine(v.random_pixel(v.own(units.Terran.Barracks), self.rng))
         else:
@@ -281,13 +311,15 @@ class MacroRulesAgent(ReducedRandomAgent):
     :func:`macro_feasible` allows — idle SCVs back to mining, a depot when free supply runs low
     and none is being built, SCVs up to ``scvs``, barracks up to ``barracks``, marines, else
     no-op — and plays it out as the macro space does (:meth:`ReducedRandomAgent.macro`: which
-    SCV, where, which barracks drawn at random; minerals waited for). Unlike ``scripted`` it
-    cannot place buildings where it likes or kill its own marines, so the buildings that fit on
-    the screen cap its supply (BENCHMARKS.md, "The macro space's ceiling").
+    SCV, which barracks drawn at random, and the site as ``sites`` says; minerals waited for).
+    Unlike ``scripted`` it cannot kill its own marines, so the buildings that fit on the screen
+    cap its supply: on random sites about 109, on far sites 144 as the scripted agent's
+    (BENCHMARKS.md, "The macro space's ceiling").
     """
 
-    def __init__(self, seed: int, *, scvs: int = 20, barracks: int = 5) -> None:
-        super().__init__(seed)
+    def __init__(self, seed: int, *, scvs: int = 20, barracks: int = 5,
+                 sites: str = "random") -> None:
+        super().__init__(seed, sites=sites)
         self.scvs = scvs
         self.barracks = barracks
         self._last: dict[str, int] = {}
@@ -374,7 +406,7 @@ class ScriptedAgent(MacroAgent):
         reserve += 0 if self._ready("barracks") else 150
         if need_depot and minerals >= 100 and v.placements(2).any():
             self._hold("depot", 25)  # the SCV walks to the site before the depot shows
-            return self.build(_F.Build_SupplyDepot_screen, self._far_spot, 2)
+            return self.build(_F.Build_SupplyDepot_screen, far_spot, 2)
         if v.player[_P.idle_worker_count] > 0 and self._ready("gather"):
             self._hold("gather", 4)
             return self.gather()
@@ -387,7 +419,7 @@ class ScriptedAgent(MacroAgent):
         if (len(rax) < self.barracks and cap > 15 * n_cc and minerals >= 150 + reserve
                 and self._ready("barracks") and v.placements(3).any()):
             self._hold("barracks", 25)
-            return self.build(_F.Build_Barracks_screen, self._far_spot, 3)
+            return self.build(_F.Build_Barracks_screen, far_spot, 3)
         if rax and free >= 1 and minerals >= 50 + reserve and self._ready("marine"):
             self._rax_turn = (self._rax_turn + 1) % len(rax)
             if self._rax_turn == 0:
@@ -415,21 +447,6 @@ class ScriptedAgent(MacroAgent):
                 return
             yield train("now")
             ok = self._v().selected_type() == unit_type
-
-    @staticmethod
-    def _far_spot(v: ScreenView, size: int) -> tuple[int, int] | None:
-        """The free spot farthest from the minerals, so buildings never block mining."""
-        ok = v.placements(size)
-        if not ok.any():
-            return None
-        ys, xs = np.nonzero(ok)
-        my, mx = np.nonzero(v.minerals())
-        if len(my):
-            d = (ys - my.mean()) ** 2 + (xs - mx.mean()) ** 2
-        else:
-            d = xs.astype(float)
-        i = int(np.argmax(d))
-        return int(xs[i]), int(ys[i])
 
 
 AGENTS: dict[str, Callable[[int], base_agent.BaseAgent]] = {

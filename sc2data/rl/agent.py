@@ -82,7 +82,7 @@ class PolicyAgent(base_agent.BaseAgent):
         super().reset()
         seeds = np.random.SeedSequence(self.seed).generate_state(2, np.uint32)
         self._torch = torch.Generator().manual_seed(int(seeds[0])).get_state()
-        self.expander = ReducedRandomAgent(int(seeds[1]))
+        self.expander = ReducedRandomAgent(int(seeds[1]), sites=self.cfg.macro_sites)
         self._macro = None
         self._sent = 0
 

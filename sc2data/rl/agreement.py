@@ -243,7 +243,8 @@ def _play(run: Path, cfg: Any, judge: _Judge, *, episodes: int, deterministic: b
 
     loops = cfg.episode_steps * STEP_MUL if cfg.episode_steps else None
     env = BuildMarinesGym(cfg.action_space, backend=cfg.backend, obs=cfg.obs_config(),
-                          game_loops=loops, merge_waits=cfg.merge_waits)
+                          game_loops=loops, merge_waits=cfg.merge_waits,
+                          sites=cfg.macro_sites)
     try:
         model = runs.load_model(run, env)
     except BaseException:

@@ -7,7 +7,9 @@ default; ``backend="sc2"`` is the real game through pysc2) behind gymnasium's ``
   barracks, train a marine, send idle workers to mine, no-op — each played out as pysc2
   ``FunctionCall``s by the reduced-random agent's own macro code
   (:meth:`sc2data.game.agents.ReducedRandomAgent.macro`), with its random choices (which SCV,
-  which free spot, which barracks) drawn from the episode's seeded generator. As that agent
+  which free spot, which barracks) drawn from the episode's seeded generator; ``sites="far"``
+  builds on the free site farthest from the minerals instead of a random one (the scripted
+  agent's choice: more buildings fit, so the supply ceiling is higher). As that agent
   does, a macro that costs minerals first waits for them (``no_op`` steps, up to
   ``ReducedRandomAgent.PATIENCE`` = 60, then gives up): without saving up, a policy that spends
   whenever it can is too poor ever to afford a barracks (a masked uniform random policy made no
@@ -128,7 +130,7 @@ class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
                  layers: str = "paper", game_loops: int | None = None,
                  step_mul: int = STEP_MUL, obs: str | ObsConfig = "stored",
                  draw: Iterable[str] | None = None, merge_waits: bool = False,
-                 **env_kwargs: Any) -> None:
+                 sites: str = "random", **env_kwargs: Any) -> None:
         if action_space not in ACTION_SPACES:
             raise Sc2DataError(f"unknown action space {action_space!r}; choose one of: "
                                f"{', '.join(ACTION_SPACES)}")
@@ -155,7 +157,8 @@ class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
         self._env: Any = None
         self._ts: Any = None
         self._view: ScreenView | None = None
-        self._expander = ReducedRandomAgent(0)
+        self.sites = sites
+        self._expander = ReducedRandomAgent(0, sites=sites)
         self.frames: list[Any] = []
         """pysc2 observations of the last decision: the one before it, then one per pysc2 step."""
         self.events: list[tuple[Any, ...]] = []
@@ -173,7 +176,7 @@ class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
                 self._env.close()
             self._env = make_env(self.backend, seed=env_seed, step_mul=self.step_mul,
                                  **self._env_kwargs)
-        self._expander = ReducedRandomAgent(macro_seed)
+        self._expander = ReducedRandomAgent(macro_seed, sites=self.sites)
         self._ts = self._env.reset()[0]
         self._view = ScreenView(self._ts)
         self.frames = [self._ts.observation]

@@ -72,8 +72,9 @@ EVAL_SHAPE: Shape = {"episodes": int, "seeds": [int], "sides": [str], "sampled":
                      "actions?": {"*": {"*": float}}}
 """``eval.json``, as :func:`read_eval` checks it."""
 BASELINES_SHAPE: Shape = {"episodes": int, "seeds": [int], "episode_steps": (int, type(None)),
-                          "protocol": int, "agents": {"*": {"space": str, **SCORES_SHAPE,
-                                                            "actions?": {"*": float}}}}
+                          "protocol": int, "macro_sites?": str,
+                          "agents": {"*": {"space": str, **SCORES_SHAPE,
+                                           "actions?": {"*": float}}}}
 """``baselines.json``, as :func:`read_baselines` checks it."""
 
 REFERENCE_AGENTS: dict[str, str] = {
@@ -265,7 +266,8 @@ def _load_player(run: str) -> None:
     torch.set_num_threads(1)
     cfg = load_config(Path(run))
     env = BuildMarinesGym(cfg.action_space, backend=cfg.backend, obs=cfg.obs_config(),
-                          game_loops=game_loops(cfg), merge_waits=cfg.merge_waits)
+                          game_loops=game_loops(cfg), merge_waits=cfg.merge_waits,
+                          sites=cfg.macro_sites)
     try:
         _PLAYER = (run, load_model(Path(run), env), env)
     except BaseException:
@@ -363,13 +365,15 @@ def summary(result: dict[str, Any]) -> str:
 # -- reference agents -------------------------------------------------------------------------
 
 def _agent_episodes(name: str, seeds: Sequence[int], episode_steps: int | None,
-                    tick: Callable[[], None]) -> list[int]:
+                    tick: Callable[[], None], sites: str = "random") -> list[int]:
     """Marines made by a pysc2 agent of :mod:`sc2data.game.agents` on the seeded episodes (the
     simulator seeded as :class:`~sc2data.rl.envs.BuildMarinesGym` seeds it; the agent with the
-    episode's seed)."""
-    from sc2data.game.agents import make_agent
+    episode's seed; the macro agents building on ``sites``)."""
+    from sc2data.game.agents import MacroRulesAgent, ReducedRandomAgent, make_agent
     from sc2data.game.agents import play as play_agent
     from sc2data.game.env import make_env
+
+    macro_agents = {"reduced-random": ReducedRandomAgent, "macro-rules": MacroRulesAgent}
 
     kwargs = {"game_loops": episode_steps * STEP_MUL} if episode_steps else {}
     marines = []
@@ -377,7 +381,9 @@ def _agent_episodes(name: str, seeds: Sequence[int], episode_steps: int | None,
         env = make_env("sim", seed=game_seed(seed), **kwargs)
         try:
             ts: Any = None
-            for ts in play_agent(env, make_agent(name, seed=seed)):  # noqa: B007  (the last)
+            agent = (macro_agents[name](seed, sites=sites) if name in macro_agents
+                     else make_agent(name, seed=seed))
+            for ts in play_agent(env, agent):  # noqa: B007  (the last)
                 pass
             marines.append(int(np.asarray(ts.observation["score_cumulative"])[0]))
         finally:
@@ -388,11 +394,16 @@ def _agent_episodes(name: str, seeds: Sequence[int], episode_steps: int | None,
 
 def baselines(out: Path, episodes: int = 10, episode_steps: int | None = None,
               agents: Sequence[str] = tuple(REFERENCE_AGENTS),
-              progress: bool | None = None) -> dict[str, Any]:
+              progress: bool | None = None, sites: str = "random") -> dict[str, Any]:
     """Play the reference agents on the evaluation episodes (simulator); writes and returns
     ``OUT/baselines.json``: per agent its action space and :func:`scores`, and for the uniform
-    policies the share of each function (or macro) they chose, as ``eval.json``'s ``actions``."""
+    policies the share of each function (or macro) they chose, as ``eval.json``'s ``actions``;
+    the macro-space agents build on ``sites`` (``rl train --macro-sites``)."""
     require_rl("sc2data rl baselines")
+    from sc2data.game.agents import SITES
+
+    if sites not in SITES:
+        raise Sc2DataError(f"unknown macro sites {sites!r}; choose one of: {', '.join(SITES)}")
     unknown = [a for a in agents if a not in REFERENCE_AGENTS]
     if unknown:
         raise Sc2DataError(f"unknown reference agent {unknown[0]!r}; choose from: "
@@ -406,12 +417,12 @@ def baselines(out: Path, episodes: int = 10, episode_steps: int | None = None,
 
     record: dict[str, Any] = {"episodes": episodes, "seeds": seeds, "sides": sides,
                               "episode_steps": episode_steps, "backend": "sim",
-                              "protocol": PROTOCOL, "agents": {}}
+                              "protocol": PROTOCOL, "macro_sites": sites, "agents": {}}
     with bar(episodes * len(agents), desc="rl baselines", unit="episode", show=progress) as b:
         for name in agents:
             space = REFERENCE_AGENTS[name]
             if name.startswith("uniform-"):
-                env = BuildMarinesGym(space, obs="compact",
+                env = BuildMarinesGym(space, obs="compact", sites=sites,
                                       game_loops=episode_steps * STEP_MUL if episode_steps
                                       else None)
                 chosen: Counter[str] = Counter()
@@ -424,7 +435,8 @@ def baselines(out: Path, episodes: int = 10, episode_steps: int | None = None,
                 record["agents"][name] = {"space": space, **scores(marines),
                                           "actions": action_shares(chosen)}
             else:
-                marines = _agent_episodes(name, seeds, episode_steps, lambda: b.update(1))
+                marines = _agent_episodes(name, seeds, episode_steps, lambda: b.update(1),
+                                          sites)
                 record["agents"][name] = {"space": space, **scores(marines)}
     with writing(str(out / "baselines.json"), "free some space, then rerun the same command"):
         out.mkdir(parents=True, exist_ok=True)
@@ -450,9 +462,15 @@ def read_baselines(path: Path) -> dict[str, Any]:
 
 def reference_summary(record: dict[str, Any]) -> list[str]:
     """One line per reference agent: marines per episode, mean ± sample std and IQM."""
-    return [f"{name} ({a['space']}): marines per episode {a['mean']:.2f} ± {a['std']:.2f} "
-            f"(IQM {a['iqm']:.2f}) over {record['episodes']} episodes"
-            for name, a in record["agents"].items()]
+    sites = record.get("macro_sites", "random")
+    lines = []
+    for name, a in record["agents"].items():
+        where = a["space"]
+        if sites != "random" and name in ("uniform-macro", "reduced-random", "macro-rules"):
+            where += f", {sites} sites"
+        lines.append(f"{name} ({where}): marines per episode {a['mean']:.2f} ± {a['std']:.2f} "
+                     f"(IQM {a['iqm']:.2f}) over {record['episodes']} episodes")
+    return lines
 
 
 # -- learning curves --------------------------------------------------------------------------

@@ -63,6 +63,8 @@ class GameConfig:
     """The layers and vectors of each decision's pysc2 frames kept for the reward (None: none)."""
     merge_waits: bool = False
     """Macro space: forced ``no_op`` steps join the decision before them (``BuildMarinesGym``)."""
+    sites: str = "random"
+    """Macro space: where buildings go (``BuildMarinesGym``)."""
 
     def make(self) -> BuildMarinesGym:
         draw = None if self.frames is None else frozenset(l.key for l in self.frames.layers)
@@ -70,7 +72,7 @@ class GameConfig:
             draw = frozenset()
         return BuildMarinesGym(self.action_space, backend=self.backend, obs=self.obs,
                                game_loops=self.game_loops, draw=draw,
-                               merge_waits=self.merge_waits)
+                               merge_waits=self.merge_waits, sites=self.sites)
 
     def max_steps(self) -> int:
         return 1 if self.action_space == "paper" else MAX_DECISION_STEPS

@@ -18,6 +18,7 @@ from sc2data.game.agents import (
     MacroRulesAgent,
     ReducedRandomAgent,
     ScriptedAgent,
+    far_spot,
     make_agent,
     play,
 )
@@ -268,3 +269,28 @@ def test_macro_rules_agent_fills_its_supply_ceiling_without_killing_a_marine() -
     # the buildings that fit on the screen cap its supply: it ends supply-blocked below 200
     assert last[_P.food_used] == last[_P.food_cap] < 200
     assert marines == events["completed", T.Marine] >= 60, marines
+
+
+@pytest.mark.parametrize("sites", ["random", "far"])
+def test_macros_build_on_the_sites_asked_for(sites: str) -> None:
+    agent = ReducedRandomAgent(0, sites=sites)
+    agent.view = ScreenView(_timestep(available=(0, 1, 2, 3, 4, 91)))
+    macro = agent.macro("build_supply_depot")
+    assert next(macro).function == _F.select_point.id  # an SCV first
+    agent.view = ScreenView(_timestep(selected=T.SCV, available=(0, 1, 2, 3, 4, 91)))
+    build = next(macro)
+    far = far_spot(agent.view, 2)
+    assert build.function == _F.Build_SupplyDepot_screen.id
+    assert (tuple(build.arguments[1]) == far) == (sites == "far"), (build.arguments[1], far)
+    with pytest.raises(Sc2DataError, match="unknown sites 'near'"):
+        ReducedRandomAgent(0, sites="near")
+
+
+def test_far_sites_raise_the_macro_rules_supply_ceiling() -> None:
+    """On far sites more depots fit: the same rules end with a higher supply cap."""
+    caps = {}
+    for sites in ("random", "far"):
+        frames, events = _episode("macro-rules", 0, MacroRulesAgent(0, sites=sites))
+        caps[sites] = int(frames[-1].observation["player"][_P.food_cap])
+        assert events["died", T.Marine] == 0
+    assert caps["far"] >= caps["random"] + 16, caps

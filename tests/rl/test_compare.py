@@ -268,15 +268,17 @@ def test_runs_written_before_shaping_read_as_event_shaping(tmp_path: Path) -> No
     assert load_config(run).shaping == "event"
 
 
-def test_runs_written_before_merged_waits_read_as_asking_at_every_step(tmp_path: Path) -> None:
+def test_runs_written_before_merged_waits_and_sites_read_as_they_were_trained(
+        tmp_path: Path) -> None:
     from sc2data.rl.train import load_config
 
-    run = fake_run(tmp_path / "old", [1, 2], action_space="macro")
+    run = fake_run(tmp_path / "old", [1, 2], action_space="macro", macro_sites="far")
     assert load_config(run).merge_waits is True  # new runs merge the forced waits
+    assert load_config(run).macro_sites == "far"
     config = json.loads((run / "config.json").read_text())
-    del config["merge_waits"]
+    del config["merge_waits"], config["macro_sites"]
     _write_json(run / "config.json", config)
-    assert load_config(run).merge_waits is False
+    assert load_config(run).merge_waits is False and load_config(run).macro_sites == "random"
 
 
 def test_shaping_defaults_to_the_experiments_choice_per_reward(tmp_path: Path) -> None:

@@ -17,6 +17,7 @@ from sc2data.rl.evaluate import (
     eval_seeds,
     game_seed,
     read_baselines,
+    reference_summary,
     side_of,
 )
 from sc2data.rl.train import EVAL_SEED
@@ -75,6 +76,7 @@ def test_baselines_play_every_reference_agent_on_the_evaluation_episodes(
     assert code == 0, err
     record = json.loads((out / "baselines.json").read_text())
     assert record["seeds"] == eval_seeds(2)[0] and record["episode_steps"] == 30
+    assert record["macro_sites"] == "random" and "far sites" not in text
     assert set(record["agents"]) == set(REFERENCE_AGENTS)
     for name, agent in record["agents"].items():
         assert agent["space"] == REFERENCE_AGENTS[name] and len(agent["marines"]) == 2
@@ -88,6 +90,11 @@ def test_baselines_play_every_reference_agent_on_the_evaluation_episodes(
     assert json.loads((out / "baselines.json").read_text()) == record
     code, _, err = run_cli(["rl", "baselines", "--out", out, "--episodes", "0"], capsys)
     assert_one_line_error(code, err, "--episodes")
+    code, _, err = run_cli(["rl", "baselines", "--out", out, "--macro-sites", "near"], capsys)
+    assert_one_line_error(code, err, "unknown macro sites 'near'")
+    far = reference_summary({**record, "macro_sites": "far"})
+    assert [("far sites" in line) for line in far] == [
+        name in ("uniform-macro", "reduced-random", "macro-rules") for name in record["agents"]]
 
 
 class _Always:

@@ -305,3 +305,18 @@ def test_reset_infos_and_json_friendly_infos() -> None:
     finally:
         vec.close()
 
+
+
+def test_a_reward_that_reads_frames_keeps_the_games_settings(mem_run: Path) -> None:
+    """The vector env adds the reward's frame schema to the game config; nothing else of it is
+    lost on the way (merged waits, sites)."""
+    cfg = RLConfig(out="unused", action_space="macro", reward="narration", mem=str(mem_run),
+                   envs=1, processes=0, macro_sites="far", episode_steps=STEPS)
+    narration, scorer = check_config(cfg)
+    vec = make_vec_env(cfg, scorer, narration)
+    try:
+        assert vec.cfg.frames is not None
+        assert vec.cfg.merge_waits and vec.cfg.sites == "far"
+        assert vec.cfg.game_loops == STEPS * 8
+    finally:
+        vec.close()

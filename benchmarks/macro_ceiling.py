@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from sc2data._pysc2 import features, units
-from sc2data.game.agents import SITES, MacroRulesAgent, ReducedRandomAgent, make_agent, play
+from sc2data.game.agents import SITES, make_agent, play
 from sc2data.game.env import make_env
 from sc2data.game.screen import ScreenView
 from sc2data.rl.envs import BuildMarinesGym
@@ -66,9 +66,7 @@ def _observations(agent: str, seed: int, sites: str) -> Iterator[Any]:
         return
     env = make_env("sim", seed=game_seed(seed))
     try:
-        macro = {"reduced-random": ReducedRandomAgent, "macro-rules": MacroRulesAgent}
-        player = macro[agent](seed, sites=sites) if agent in macro else make_agent(agent, seed=seed)
-        for ts in play(env, player):
+        for ts in play(env, make_agent(agent, seed=seed, sites=sites)):
             yield ts.observation, tuple(env.events)
     finally:
         env.close()

@@ -512,9 +512,10 @@ def resolve_agent(name: str) -> AgentSpec:
     raise Sc2DataError(f"unknown agent {name!r}; choose one of: {', '.join(choices)}{hint}")
 
 
-def make_agent(name: str, *, seed: int) -> base_agent.BaseAgent:
+def make_agent(name: str, *, seed: int, sites: str = "random") -> base_agent.BaseAgent:
     """A new agent by registry name (or ``kind:ARG``, e.g. ``policy:RUN``); call
-    ``setup(obs_spec, action_spec)`` before use.
+    ``setup(obs_spec, action_spec)`` before use. ``sites`` (:data:`SITES`) is where the agents
+    that play the six macros (``reduced-random``, ``macro-rules``) build; the others ignore it.
 
     Seeding: ``random`` draws from its own ``numpy.random.RandomState(seed)`` (the same calls
     pysc2's agent makes after ``numpy.random.seed(seed)``); ``reduced-random`` and ``scripted``
@@ -522,6 +523,9 @@ def make_agent(name: str, *, seed: int) -> base_agent.BaseAgent:
     click); a ``policy`` samples from its own torch generator seeded with ``seed``. None touches
     a global RNG, so one seed and one environment seed give one episode.
     """
+    macro_agents = {"reduced-random": ReducedRandomAgent, "macro-rules": MacroRulesAgent}
+    if sites != "random" and name in macro_agents:
+        return macro_agents[name](seed, sites=sites)
     return resolve_agent(name).factory(seed)
 
 

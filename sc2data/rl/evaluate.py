@@ -369,11 +369,9 @@ def _agent_episodes(name: str, seeds: Sequence[int], episode_steps: int | None,
     """Marines made by a pysc2 agent of :mod:`sc2data.game.agents` on the seeded episodes (the
     simulator seeded as :class:`~sc2data.rl.envs.BuildMarinesGym` seeds it; the agent with the
     episode's seed; the macro agents building on ``sites``)."""
-    from sc2data.game.agents import MacroRulesAgent, ReducedRandomAgent, make_agent
+    from sc2data.game.agents import make_agent
     from sc2data.game.agents import play as play_agent
     from sc2data.game.env import make_env
-
-    macro_agents = {"reduced-random": ReducedRandomAgent, "macro-rules": MacroRulesAgent}
 
     kwargs = {"game_loops": episode_steps * STEP_MUL} if episode_steps else {}
     marines = []
@@ -381,9 +379,7 @@ def _agent_episodes(name: str, seeds: Sequence[int], episode_steps: int | None,
         env = make_env("sim", seed=game_seed(seed), **kwargs)
         try:
             ts: Any = None
-            agent = (macro_agents[name](seed, sites=sites) if name in macro_agents
-                     else make_agent(name, seed=seed))
-            for ts in play_agent(env, agent):  # noqa: B007  (the last)
+            for ts in play_agent(env, make_agent(name, seed=seed, sites=sites)):  # noqa: B007
                 pass
             marines.append(int(np.asarray(ts.observation["score_cumulative"])[0]))
         finally:

@@ -103,6 +103,18 @@ def one_run(out: Path, space: str, reward: str, seed: int, steps: int, a: argpar
         times_file.write_text(json.dumps(times))
 
 
+def macro_sites(train_args: str) -> str:
+    """The ``--macro-sites`` the runs train with (``random`` unless ``--train-args`` names one):
+    the reference agents must build where the runs' macros build."""
+    args = shlex.split(train_args)
+    for i, arg in enumerate(args):
+        if arg.startswith("--macro-sites="):
+            return arg.split("=", 1)[1]
+        if arg == "--macro-sites" and i + 1 < len(args):
+            return args[i + 1]
+    return "random"
+
+
 def fmt(values: list[float]) -> str:
     return f"{np.mean(values):.1f} ± {np.std(values):.1f}" if values else "—"
 
@@ -186,12 +198,14 @@ def main() -> None:
             for f in futures:
                 f.result()
         episodes = dict(s.split("=", 1) for s in a.eval_episodes)
+        sites = macro_sites(a.train_args)
         for space in budgets:
             runs = sorted(str(p) for p in (out / space).iterdir() if (p / "config.json").is_file())
-            ref = out / f"baselines-{episodes[space]}"
+            ref = out / f"baselines-{episodes[space]}" if sites == "random" else \
+                out / f"baselines-{episodes[space]}-{sites}"
             if not (ref / "baselines.json").is_file():
                 sh(["rl", "baselines", "--out", str(ref), "--episodes", episodes[space],
-                    "--no-progress"], out / "baselines.log")
+                    "--macro-sites", sites, "--no-progress"], out / "baselines.log")
             sh(["rl", "plot", *runs, "--group", "--baselines", str(ref), "--out",
                 str(out / f"curves-{space}.png")], out / "plot.log", check=False)
             sh(["rl", "compare", *runs, "--baselines", str(ref), "--out",

@@ -4,7 +4,8 @@ The agent plays the run's MaskablePPO policy (``RUN/model.zip``) on raw pysc2 ti
 rollout, recipe, ``build`` or live ``render`` can play it, on the simulator or the real game:
 
 * it sees what the policy was trained on: the run's observation (:class:`~sc2data.rl.obs.Observer`
-  of :meth:`~sc2data.rl.train.RLConfig.obs_config`) and the same action masks;
+  of :meth:`~sc2data.rl.train.RLConfig.obs_config`, with a :class:`~sc2data.rl.obs.MacroClock`
+  kept as the env keeps it) and the same action masks;
 * it acts in the run's action space: a paper action becomes one call
   (:func:`~sc2data.rl.envs.paper_call`); a macro is played out over the following steps by the
   reduced-random agent's macro code exactly as :class:`~sc2data.rl.envs.BuildMarinesGym` plays
@@ -65,14 +66,18 @@ class PolicyAgent(base_agent.BaseAgent):
 
     def __init__(self, model: Any, cfg: Any, seed: int) -> None:
         super().__init__()
-        from sc2data.rl.obs import Observer
+        from sc2data.rl.obs import MacroClock, Observer
 
         self.model = model
         self.cfg = cfg
         self.seed = seed
         self.observer = Observer(cfg.obs_config())
         self._macro: Iterator[actions.FunctionCall] | None = None
+        self._name = ""
         self._sent = 0
+        self._acted = False
+        self.clock = MacroClock()
+        """When each macro last acted, as the env's (the observation's ``history``)."""
         self.reset()
 
     def reset(self) -> None:
@@ -85,6 +90,7 @@ class PolicyAgent(base_agent.BaseAgent):
         self.expander = ReducedRandomAgent(int(seeds[1]), sites=self.cfg.macro_sites)
         self._macro = None
         self._sent = 0
+        self.clock.reset()
 
     def step(self, obs: Any) -> actions.FunctionCall:
         super().step(obs)
@@ -105,7 +111,9 @@ class PolicyAgent(base_agent.BaseAgent):
                 cost = self.expander.COST.get(name, 0)
                 self._macro = (self.expander.save_up(cost, macro, self.expander.PATIENCE)
                                if cost else macro)
+                self._name = name
                 self._sent = 0
+                self._acted = False
             call = next(self._macro, None)
             if call is None or not view.can(call):
                 self._macro = None
@@ -113,6 +121,11 @@ class PolicyAgent(base_agent.BaseAgent):
                     return actions.FUNCTIONS.no_op()
                 continue  # it ended after its last call: decide again on this observation
             self._sent += 1
+            if not self._acted and (self._name == "no_op"
+                                    or call.function != actions.FUNCTIONS.no_op.id):
+                self.clock.acted(MACROS.index(self._name),
+                                 int(np.asarray(obs.observation["game_loop"]).reshape(-1)[0]))
+                self._acted = True
             return call
         return actions.FUNCTIONS.no_op()
 
@@ -123,7 +136,7 @@ class PolicyAgent(base_agent.BaseAgent):
         count and generator are left as they were."""
         import torch
 
-        arrays = self.observer(obs.observation)
+        arrays = self.observer(obs.observation, clock=self.clock)
         threads = torch.get_num_threads()
         torch.set_num_threads(1)
         try:

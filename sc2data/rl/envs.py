@@ -49,7 +49,9 @@ Observations (:mod:`sc2data.rl.obs`): ``obs="stored"`` (the default here) is a `
 ``Box`` per key of the schema (``Schema.named(layers)``, the paper's 13 screen + 7 minimap
 layers by default) in the stored dtypes, plus its non-spatial vectors (``player``,
 ``score_cumulative``, ``game_loop``) — exactly what ``Schema.extract`` stores for a frame;
-``obs="compact"`` the one-hot encoding made for a small CNN. The raw pysc2 observations of the
+``obs="compact"`` the one-hot encoding made for a small CNN (with ``history``, in the macro
+space, also the game time since each macro last acted: the env keeps the episode's
+:class:`~sc2data.rl.obs.MacroClock`). The raw pysc2 observations of the
 last decision are kept in :attr:`BuildMarinesGym.frames` for the reward wrappers (never put in
 ``info``), and on the simulator what happened in each of its pysc2 steps in
 :attr:`BuildMarinesGym.events` (for judging rewards against the game's record). ``draw``
@@ -77,7 +79,7 @@ from sc2data.game.env import make_env
 from sc2data.game.screen import ScreenView
 from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.vocab import SCREEN_SIZE, STEP_MUL
-from sc2data.rl.obs import PAPER_FUNCTIONS, ObsConfig, Observer
+from sc2data.rl.obs import PAPER_FUNCTIONS, MacroClock, ObsConfig, Observer
 
 ACTION_SPACES: tuple[str, ...] = ("macro", "paper")
 
@@ -159,6 +161,10 @@ class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
         self._view: ScreenView | None = None
         self.sites = sites
         self._expander = ReducedRandomAgent(0, sites=sites)
+        self._clock = MacroClock()
+        if self.observer.cfg.history and action_space != "macro":
+            raise Sc2DataError("--history is for the macro space (the time since each macro "
+                               "last acted)")
         self.frames: list[Any] = []
         """pysc2 observations of the last decision: the one before it, then one per pysc2 step."""
         self.events: list[tuple[Any, ...]] = []
@@ -177,6 +183,7 @@ class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
             self._env = make_env(self.backend, seed=env_seed, step_mul=self.step_mul,
                                  **self._env_kwargs)
         self._expander = ReducedRandomAgent(macro_seed, sites=self.sites)
+        self._clock.reset()
         self._ts = self._env.reset()[0]
         self._view = ScreenView(self._ts)
         self.frames = [self._ts.observation]
@@ -246,9 +253,13 @@ class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
         reward = 0.0
         macro = agent.macro(name)
         cost = agent.COST.get(name, 0)
+        acted = False
         for call in agent.save_up(cost, macro, agent.PATIENCE) if cost else macro:
             if not self._view.can(call):  # type: ignore[union-attr]
                 break
+            if not acted and (name == "no_op" or call.function != NO_OP.function):
+                self._clock.acted(MACROS.index(name), self._loop())
+                acted = True
             reward += self._send(call)
             agent.view = self._view
             if self._ts.last():
@@ -268,7 +279,7 @@ class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
         return reward
 
     def _obs(self) -> dict[str, np.ndarray]:
-        return self.observer(self._ts.observation)
+        return self.observer(self._ts.observation, clock=self._clock)
 
     def _loop(self) -> int:
         return int(np.asarray(self._ts.observation["game_loop"]).reshape(-1)[0])

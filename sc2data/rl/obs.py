@@ -16,7 +16,12 @@
     at the same size. The camera is locked on BuildMarines and the screen shows the whole
     playable area, so it adds little; off by default.
   - ``vector``: float32, ``log1p`` of the ``player`` fields, the episode's elapsed fraction of
-    its 14,400 game loops, and which :data:`PAPER_FUNCTIONS` are available.
+    its 14,400 game loops, and which :data:`PAPER_FUNCTIONS` are available; with ``history``
+    (macro space), then per macro the game time since it last acted (:class:`MacroClock`).
+    pysc2 hands an agent its ``last_actions`` for the same reason: a feed-forward policy cannot
+    otherwise tell that it sent a builder a moment ago (one that has not reached its site shows
+    nowhere on the screen), and the macro-rules agent's own timers are what keep it from sending
+    a second one.
 
 An :class:`Observer` turns one pysc2 observation into its arrays (writing into given arrays when
 asked: the vector env writes straight into shared memory) and names the feature layers it reads,
@@ -34,6 +39,7 @@ import numpy as np
 from gymnasium import spaces
 
 from sc2data._pysc2 import actions, features, units
+from sc2data.game.agents import ReducedRandomAgent
 from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.vocab import SCREEN_SIZE
 from sc2data.schema import Schema
@@ -47,6 +53,9 @@ PAPER_FUNCTIONS: tuple[str, ...] = (
 the observation reports which of them are available; :mod:`sc2data.rl.envs` acts with them)."""
 
 OBSERVATIONS: tuple[str, ...] = ("stored", "compact")
+
+MACROS: tuple[str, ...] = ReducedRandomAgent.MACROS
+"""The macro actions, in action-index order (:mod:`sc2data.rl.envs` acts with them)."""
 
 UNIT_TYPES: tuple[int, ...] = (
     units.Terran.CommandCenter, units.Terran.SupplyDepot, units.Terran.Barracks,
@@ -77,11 +86,16 @@ class ObsConfig:
     """``compact``: 64 or 32 pixels a side."""
     minimap: bool = False
     """``compact``: add the minimap channels."""
+    history: bool = False
+    """``compact``, macro space: the vector ends with :class:`MacroClock`'s features."""
 
     def check(self) -> None:
         if self.kind not in OBSERVATIONS:
             raise Sc2DataError(f"unknown observation {self.kind!r}; choose one of: "
                                f"{', '.join(OBSERVATIONS)}")
+        if self.history and self.kind != "compact":
+            raise Sc2DataError("--history needs --obs compact (the stored observation is the "
+                               "schema's, nothing added)")
         if self.size not in (SCREEN_SIZE, SCREEN_SIZE // 2):
             raise Sc2DataError(f"--obs-size must be {SCREEN_SIZE} or {SCREEN_SIZE // 2}, "
                                f"got {self.size}")
@@ -122,7 +136,7 @@ class Observer:
         boxes = {"screen": spaces.Box(0, 255, (len(self.screen_channels), s, s), np.uint8)}
         if cfg.minimap:
             boxes["minimap"] = spaces.Box(0, 255, (len(self.minimap_channels), s, s), np.uint8)
-        n_vec = len(features.Player) + 1 + n_funcs
+        n_vec = len(features.Player) + 1 + n_funcs + (len(MACROS) if cfg.history else 0)
         boxes["vector"] = spaces.Box(0.0, 32.0, (n_vec,), np.float32)  # log1p(2**31) < 22
         self.space = spaces.Dict(boxes)
         self.layers = frozenset(
@@ -146,9 +160,10 @@ class Observer:
         """Zeroed arrays of one observation."""
         return {k: np.zeros(b.shape, b.dtype) for k, b in self.space.spaces.items()}
 
-    def __call__(self, obs: Mapping[str, Any],
-                 out: Mapping[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
-        """The policy's arrays of ``obs``, written into ``out`` when given (and returned)."""
+    def __call__(self, obs: Mapping[str, Any], out: Mapping[str, np.ndarray] | None = None,
+                 clock: MacroClock | None = None) -> dict[str, np.ndarray]:
+        """The policy's arrays of ``obs``, written into ``out`` when given (and returned);
+        ``clock`` is the episode's :class:`MacroClock`, needed with ``history``."""
         if self.cfg.kind == "stored":
             arrays = self.schema.extract(obs)
             if out is None:
@@ -162,6 +177,10 @@ class Observer:
         if self.cfg.minimap:
             self._minimap(np.asarray(obs["feature_minimap"]), dest["minimap"])
         self._vector(obs, dest["vector"])
+        if self.cfg.history:
+            if clock is None:
+                raise ValueError("an observation with history needs the episode's MacroClock")
+            dest["vector"][-len(MACROS):] = clock.features(_loop(obs))
         return dest
 
     # -- compact ---------------------------------------------------------------------------------
@@ -195,10 +214,41 @@ class Observer:
         player = np.asarray(obs["player"], dtype=np.float64).reshape(-1)
         n = len(player)
         np.log1p(np.maximum(player, 0.0), out=out[:n], casting="unsafe")
-        out[n] = float(np.asarray(obs["game_loop"]).reshape(-1)[0]) / GAME_LOOPS
+        out[n] = _loop(obs) / GAME_LOOPS
         table = np.zeros(len(actions.FUNCTIONS), dtype=bool)
         table[np.asarray(obs["available_actions"])] = True
-        out[n + 1:] = table[_paper_ids()]
+        out[n + 1:n + 1 + len(PAPER_FUNCTIONS)] = table[_paper_ids()]
+
+
+class MacroClock:
+    """When each macro last *acted* in an episode: sent its first call that is not a wait (the
+    ``no_op`` macro: its ``no_op``). A macro that gave up waiting for minerals or sent nothing
+    did not act; a forced wait (``merge_waits``) is no choice and not recorded.
+
+    The features are ``log(1 + loops since) / log(1 + 14,400)`` per macro, in :data:`MACROS`
+    order, 1 for one that has not acted this episode: fine where it matters (an SCV walks to a
+    far site in about 150 loops, a marine trains in 400) and bounded. The gymnasium env and the
+    ``policy:RUN`` rollout agent keep one each, fed the same way.
+    """
+
+    def __init__(self) -> None:
+        self.last = np.full(len(MACROS), -1, np.int64)
+
+    def reset(self) -> None:
+        self.last[:] = -1
+
+    def acted(self, macro: int, game_loop: int) -> None:
+        """Macro ``macro`` (its index) sent a call on the observation of ``game_loop``."""
+        self.last[macro] = game_loop
+
+    def features(self, game_loop: int) -> np.ndarray:
+        since = np.where(self.last < 0, GAME_LOOPS,
+                         np.clip(game_loop - self.last, 0, GAME_LOOPS))
+        return (np.log1p(since) / np.log1p(GAME_LOOPS)).astype(np.float32)
+
+
+def _loop(obs: Mapping[str, Any]) -> int:
+    return int(np.asarray(obs["game_loop"]).reshape(-1)[0])
 
 
 def _fit(planes: np.ndarray, out: np.ndarray, n_onehot: int) -> None:

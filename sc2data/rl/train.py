@@ -183,6 +183,10 @@ class RLConfig:
     farthest from the minerals, as the scripted agent: more buildings fit)."""
     # BENCHMARKS.md, "The macro space's ceiling": the scripted rules make 88.2 marines on random
     # sites and 119.2 on far ones.
+    history: bool = False
+    """Macro space, compact observation: the policy also sees the game time since each macro
+    last acted (as pysc2's last_actions; else a builder on its way shows nowhere)."""
+    # sc2data.rl.obs.MacroClock.
     tensorboard: bool = False
     """Also write SB3's log as TensorBoard events (RUN/logs/<session>/; needs tensorboard)."""
     progress: bool | None = None
@@ -193,7 +197,8 @@ class RLConfig:
         "obs": "stored", "obs_size": 64, "minimap": False, "policy": "independent", "gamma": 0.99,
         "gae_lambda": 0.95, "epochs": 4, "learning_rate": 3e-4, "ent_coef": 0.01,
         "ent_coef_final": None, "normalize_advantage": True, "target_kl": None, "smdp": False,
-        "shaping": "event", "env_groups": 1, "merge_waits": False, "macro_sites": "random"}
+        "shaping": "event", "env_groups": 1, "merge_waits": False, "macro_sites": "random",
+        "history": False}
     """Settings added since runs were first written, as those runs had them: a run folder whose
     ``config.json`` lacks one was trained so."""
 
@@ -207,7 +212,7 @@ class RLConfig:
         from sc2data.rl.obs import ObsConfig
 
         return ObsConfig(kind=self.obs, layers=self.layers, size=self.obs_size,
-                         minimap=self.minimap)
+                         minimap=self.minimap, history=self.history)
 
     def identity(self) -> dict[str, Any]:
         return {k: v for k, v in dataclasses.asdict(self).items() if k not in self.RESUMABLE}
@@ -252,6 +257,9 @@ def check_values(cfg: RLConfig) -> None:
         raise Sc2DataError("--processes must be 0 or more")
     if cfg.threads is not None and cfg.threads < 1:
         raise Sc2DataError("--threads must be at least 1")
+    if cfg.history and cfg.action_space != "macro":
+        raise Sc2DataError("--history goes with --action-space macro (the time since each "
+                           "macro last acted)")
     cfg.obs_config().check()
     if cfg.policy not in POLICIES:
         raise Sc2DataError(f"unknown policy {cfg.policy!r}; choose one of: {', '.join(POLICIES)}")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from sc2data.ground.files import sha256_file
@@ -87,3 +88,36 @@ def test_a_bad_policy_is_one_line_before_anything_is_written(
     assert not (tmp_path / "d").exists()
     code, _, err = run_cli(["rollout", "--agent", "policy:", "--out", tmp_path / "d"], capsys)
     assert_one_line_error(code, err, "names no policy")
+
+
+def test_a_policy_agent_keeps_the_macro_clock_its_run_saw(tmp_path: Path) -> None:
+    """A run trained with ``--history`` sees, as a rollout agent, the time since each macro
+    acted, kept by the agent as the env keeps it."""
+    from tests.cli import exit_code
+
+    run = tmp_path / "timed"
+    assert exit_code("rl", "train", "--out", run, "--action-space", "macro", "--history",
+                     *TINY) == 0
+    import sc2data.rl  # noqa: F401
+    from sc2data.game.agents import make_agent
+    from sc2data.game.env import make_env
+
+    seen: list[np.ndarray] = []
+    env = make_env("sim", seed=0)
+    agent = make_agent(f"policy:{run}", seed=1)
+    agent.setup(env.observation_spec()[0], env.action_spec()[0])
+    agent.reset()
+    decide = agent._decide
+    agent._decide = lambda obs, mask: (  # type: ignore[method-assign]
+        seen.append(agent.observer(obs.observation, clock=agent.clock)["vector"][-6:].copy())
+        or decide(obs, mask))
+    try:
+        ts = env.reset()[0]
+        for _ in range(200):
+            ts = env.step([agent.step(ts)])[0]
+    finally:
+        env.close()
+    assert np.all(seen[0] == 1.0), "the first decision: nothing has acted"
+    assert any(np.any(v < 1.0) for v in seen[1:]), "later decisions see what acted"
+    assert (agent.clock.last >= 0).sum() >= 2
+    assert calls(run, seed=1, steps=150) == calls(run, seed=1, steps=150)

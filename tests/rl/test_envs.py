@@ -176,3 +176,41 @@ def test_merged_waits_play_the_same_game_asking_only_when_there_is_a_choice() ->
 def test_merged_waits_change_nothing_in_the_paper_space() -> None:
     env = BuildMarinesGym("paper", game_loops=LOOPS, merge_waits=True)
     assert not env.merge_waits
+
+
+def test_history_records_when_each_macro_last_acted() -> None:
+    """``history``: the vector ends with the clock's features; a macro acts when it sends its
+    first call that is not a wait, and one that gave up waiting did not act."""
+    from sc2data.rl.obs import GAME_LOOPS, ObsConfig
+
+    env = BuildMarinesGym("macro", obs=ObsConfig("compact", size=32, history=True),
+                          game_loops=LOOPS)
+    check_env(env, skip_render_check=True)
+    obs, _ = env.reset(seed=3)
+    assert np.all(obs["vector"][-len(MACROS):] == 1.0), "nothing has acted yet"
+    depot = MACROS.index("build_supply_depot")
+    obs, _, _, _, info = env.step(depot)  # 50 minerals at the start: waits, then builds
+    acted_at = int(env._clock.last[depot])
+    assert 0 < acted_at < info["game_loop"]
+    since = info["game_loop"] - acted_at
+    tail = obs["vector"][-len(MACROS):]
+    assert tail[depot] == pytest.approx(np.log1p(since) / np.log1p(GAME_LOOPS))
+    assert np.all(np.delete(tail, depot) == 1.0)
+    env.step(MACROS.index("train_marine") if env.action_masks()[3] else MACROS.index("no_op"))
+    assert env._clock.last[MACROS.index("train_marine")] == -1, "no barracks: it cannot act"
+    env.reset(seed=3)
+    assert np.all(env._clock.last == -1), "reset clears the clock"
+    env._expander.PATIENCE = 1  # 50 minerals, a depot costs 100: one wait, then it gives up
+    env.step(depot)
+    assert env._clock.last[depot] == -1, "a macro that gave up waiting did not act"
+    env.step(MACROS.index("no_op"))
+    assert env._clock.last[MACROS.index("no_op")] >= 0, "no_op acts by waiting"
+
+
+def test_history_is_for_the_compact_macro_observation() -> None:
+    from sc2data.rl.obs import ObsConfig
+
+    with pytest.raises(Sc2DataError, match="--history is for the macro space"):
+        BuildMarinesGym("paper", obs=ObsConfig("compact", history=True))
+    with pytest.raises(Sc2DataError, match="--history needs --obs compact"):
+        BuildMarinesGym("macro", obs=ObsConfig("stored", history=True))

@@ -120,3 +120,31 @@ def test_gym_env_with_compact_obs_passes_the_env_checker() -> None:
 
     env = BuildMarinesGym("paper", obs="compact", game_loops=8 * 30)
     check_env(env, skip_render_check=True)
+
+
+def test_macro_clock_features_by_hand() -> None:
+    from sc2data.rl.obs import GAME_LOOPS, MACROS, MacroClock
+
+    clock = MacroClock()
+    assert np.all(clock.features(0) == 1.0)  # nothing acted: as long ago as an episode lasts
+    clock.acted(1, 100)
+    f = clock.features(100)
+    assert f[1] == 0.0 and np.all(np.delete(f, 1) == 1.0) and len(f) == len(MACROS)
+    assert clock.features(199)[1] == pytest.approx(np.log(100) / np.log(GAME_LOOPS + 1))
+    assert clock.features(100 + 2 * GAME_LOOPS)[1] == 1.0  # capped
+    clock.reset()
+    assert np.all(clock.features(500) == 1.0)
+
+
+def test_history_needs_the_clock_and_widens_the_vector() -> None:
+    obs = _played(50)
+    plain = Observer(ObsConfig("compact", size=32))
+    timed = Observer(ObsConfig("compact", size=32, history=True))
+    from sc2data.rl.obs import MACROS, MacroClock
+
+    assert timed.space["vector"].shape[0] == plain.space["vector"].shape[0] + len(MACROS)
+    with pytest.raises(ValueError, match="MacroClock"):
+        timed(obs)
+    a, b = plain(obs), timed(obs, clock=MacroClock())
+    assert np.array_equal(b["vector"][:-len(MACROS)], a["vector"])
+    assert np.array_equal(b["screen"], a["screen"])

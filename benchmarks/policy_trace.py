@@ -1,0 +1,79 @@
+"""One evaluation episode of a trained macro-space ``sc2data rl`` run, decision by decision: what
+the policy was offered, how likely it made each allowed action, what it chose, and the state.
+
+A diagnostic for "why does argmax play make nothing": a policy whose probabilities barely move
+with the state plays one action again and again under argmax, however well its sampled mix
+scores (BENCHMARKS.md, "Why argmax play makes 0 in the macro space").
+
+    python benchmarks/policy_trace.py RUN                 # argmax, the first evaluation episode
+    python benchmarks/policy_trace.py RUN --sampled --episode 3 --every 5
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from sc2data._pysc2 import features
+from sc2data.rl import evaluate as ev
+from sc2data.rl.envs import MACROS
+
+_P = features.Player
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("run", type=Path)
+    ap.add_argument("--sampled", action="store_true", help="Sample actions (default: argmax).")
+    ap.add_argument("--episode", type=int, default=0, help="Which evaluation episode (0-based).")
+    ap.add_argument("--every", type=int, default=1, help="Print every Nth decision.")
+    a = ap.parse_args()
+    torch.set_num_threads(1)
+    ev._load_player(str(a.run))
+    assert ev._PLAYER is not None
+    _, model, env = ev._PLAYER
+    seeds, sides = ev.eval_seeds(max(10, a.episode + 1))  # rl evaluate's episodes
+    seed = seeds[a.episode]
+    names = MACROS
+    if env.kind != "macro":
+        raise SystemExit("policy_trace.py: macro-space runs only (a paper-space decision is a "
+                         "function and a point, not one distribution)")
+    model.set_random_seed(seed)
+    obs, _ = env.reset(seed=seed)
+    print(f"{a.run}: episode seed {seed} ({sides[a.episode]} start), "
+          f"{'sampled' if a.sampled else 'argmax'}")
+    print("decision  loop  minerals  supply   workers idle  chose               "
+          "probabilities of the allowed actions")
+    done, i, info = False, 0, {}
+    entropies = []
+    while not done:
+        mask = env.action_masks()
+        with torch.no_grad():
+            o, _ = model.policy.obs_to_tensor(obs)
+            dist = model.policy.get_distribution(o, action_masks=mask)
+            probs = dist.distribution.probs.numpy()[0]
+        allowed = mask[:len(names)]
+        p = probs[allowed]
+        entropies.append(float(-(p * np.log(np.maximum(p, 1e-12))).sum()))
+        action, _ = model.predict(obs, deterministic=not a.sampled, action_masks=mask)
+        player = env.frames[-1]["player"]
+        if i % a.every == 0:
+            chose = names[int(np.asarray(action).reshape(-1)[0])]
+            shown = " ".join(f"{n}={q:.2f}" for n, q, ok in zip(names, probs, allowed) if ok)
+            print(f"{i:8d} {int(env.frames[-1]['game_loop'][0]):5d} "
+                  f"{int(player[_P.minerals]):9d} {int(player[_P.food_used]):4d}/"
+                  f"{int(player[_P.food_cap]):<4d} {int(player[_P.food_workers]):7d} "
+                  f"{int(player[_P.idle_worker_count]):4d}  {chose:19s} {shown}")
+        obs, _, terminated, truncated, info = env.step(action)
+        done = terminated or truncated
+        i += 1
+    print(f"marines {info['marines']}, {i} decisions; entropy of the allowed actions' "
+          f"distribution: median {np.median(entropies):.2f} nats")
+    ev._close_player()
+
+
+if __name__ == "__main__":
+    main()

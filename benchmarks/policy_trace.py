@@ -24,6 +24,18 @@ from sc2data.rl.envs import MACROS
 _P = features.Player
 
 
+def state_dependence(by_mask: dict[tuple[bool, ...], list[np.ndarray]]) -> float:
+    """How far the policy's probabilities move with the state beyond what the mask does: over
+    the decisions whose allowed actions were the same, the mean total-variation distance of each
+    distribution from their mean (decisions alone with their mask are left out)."""
+    distances = []
+    for probs in by_mask.values():
+        if len(probs) > 1:
+            stack = np.stack(probs)
+            distances += list(0.5 * np.abs(stack - stack.mean(axis=0)).sum(axis=1))
+    return float(np.mean(distances)) if distances else float("nan")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run", type=Path)
@@ -49,6 +61,7 @@ def main() -> None:
           "probabilities of the allowed actions")
     done, i, info = False, 0, {}
     entropies = []
+    by_mask: dict[tuple[bool, ...], list[np.ndarray]] = {}
     while not done:
         mask = env.action_masks()
         with torch.no_grad():
@@ -57,6 +70,7 @@ def main() -> None:
             probs = dist.distribution.probs.numpy()[0]
         allowed = mask[:len(names)]
         p = probs[allowed]
+        by_mask.setdefault(tuple(bool(m) for m in allowed), []).append(probs)
         entropies.append(float(-(p * np.log(np.maximum(p, 1e-12))).sum()))
         action, _ = model.predict(obs, deterministic=not a.sampled, action_masks=mask)
         player = env.frames[-1]["player"]
@@ -72,6 +86,9 @@ def main() -> None:
         i += 1
     print(f"marines {info['marines']}, {i} decisions; entropy of the allowed actions' "
           f"distribution: median {np.median(entropies):.2f} nats")
+    print(f"state dependence: {state_dependence(by_mask):.3f} (mean total variation between a "
+          f"decision's distribution and the mean of the decisions offered the same actions; "
+          f"0: the probabilities follow the mask alone)")
     ev._close_player()
 
 

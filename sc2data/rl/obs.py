@@ -226,8 +226,8 @@ class MacroClock:
     did not act; a forced wait (``merge_waits``) is no choice and not recorded.
 
     The features are ``log(1 + loops since) / log(1 + 14,400)`` per macro, in :data:`MACROS`
-    order, 1 for one that has not acted this episode: fine where it matters (an SCV walks to a
-    far site in about 150 loops, a marine trains in 400) and bounded. The gymnasium env and the
+    order, 1 for one that has not acted this episode: fine over the first few hundred loops
+    (a builder's walk, a marine's 400 loops of training) and bounded. The gymnasium env and the
     ``policy:RUN`` rollout agent keep one each, fed the same way.
     """
 

@@ -166,6 +166,11 @@ class RLConfig:
     # With a value function that explains nothing yet, each update is then a full clipped step
     # of noise, and a zero-reward control drifts from its initial policy
     # (tests/rl/test_control.py).
+    share_features: bool = True
+    """One feature network for the policy and the value function (SB3's default); off: one
+    each (macro space)."""
+    # Andrychowicz et al. 2021 ("What matters in on-policy RL") found separate networks learn
+    # better; the paper space's spatial policy reads its one trunk's map, so it keeps one.
     target_kl: float | None = 0.05
     """Stop an update's epochs once the policy moved this far (0: never)."""
     # Approximate KL; 0 is kept as None (never).
@@ -198,7 +203,7 @@ class RLConfig:
         "gae_lambda": 0.95, "epochs": 4, "learning_rate": 3e-4, "ent_coef": 0.01,
         "ent_coef_final": None, "normalize_advantage": True, "target_kl": None, "smdp": False,
         "shaping": "event", "env_groups": 1, "merge_waits": False, "macro_sites": "random",
-        "history": False}
+        "history": False, "share_features": True}
     """Settings added since runs were first written, as those runs had them: a run folder whose
     ``config.json`` lacks one was trained so."""
 
@@ -265,6 +270,9 @@ def check_values(cfg: RLConfig) -> None:
         raise Sc2DataError(f"unknown policy {cfg.policy!r}; choose one of: {', '.join(POLICIES)}")
     if cfg.policy == "spatial" and (cfg.action_space != "paper" or cfg.obs != "compact"):
         raise Sc2DataError("--policy spatial needs --action-space paper and --obs compact")
+    if not cfg.share_features and resolved_policy(cfg) == "spatial":
+        raise Sc2DataError("--no-share-features goes with --policy independent (the spatial "
+                           "policy's point head reads the shared trunk's map)")
     for name in ("gamma", "gae_lambda"):
         if not 0.0 <= getattr(cfg, name) <= 1.0:
             raise Sc2DataError(f"--{name.replace('_', '-')} must lie in [0, 1]")
@@ -413,10 +421,12 @@ def policy_kwargs(cfg: RLConfig) -> dict[str, Any]:
     from sc2data.rl.obs import Observer
     from sc2data.rl.policy import CompactExtractor, StateExtractor
 
+    share = {} if cfg.share_features else {"share_features_extractor": False}
     if cfg.obs == "stored":
-        return {"features_extractor_class": StateExtractor}
+        return {"features_extractor_class": StateExtractor, **share}
     return {"features_extractor_class": CompactExtractor,
-            "features_extractor_kwargs": {"scales": Observer(cfg.obs_config()).scales()}}
+            "features_extractor_kwargs": {"scales": Observer(cfg.obs_config()).scales()},
+            **share}
 
 
 def _read_json(path: Path, shape: Shape) -> dict[str, Any]:

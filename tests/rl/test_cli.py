@@ -112,6 +112,9 @@ def test_narration_training_with_a_tiny_mem(mem_run: Path, tmp_path: Path,
     (["--env-groups", "0"], ("--env-groups", "at least 1")),
     (["--macro-sites", "near"], ("unknown macro sites 'near'", "far")),
     (["--action-space", "paper", "--macro-sites", "far"], ("--macro-sites", "macro")),
+    (["--action-space", "paper", "--history"], ("--history", "macro")),
+    (["--obs", "stored", "--history"], ("--history", "--obs compact")),
+    (["--action-space", "paper", "--no-share-features"], ("--no-share-features", "spatial")),
     (["--threads", "0"], ("--threads",)),
     (["--device", "tpu"], ("unknown device", "cuda")),
     (["--reward", "rules", "--bonus", "nan"], ("--bonus", "finite")),
@@ -233,3 +236,19 @@ def test_cuda_without_a_gpu_is_one_line(tmp_path: Path, capsys: pytest.CaptureFi
     code, _, err = run_cli(["rl", "train", "--out", run, *TINY, "--device", "cuda"], capsys)
     assert_one_line_error(code, err, "--device cuda", "no CUDA GPU")
     assert not run.exists()
+
+
+def test_separate_feature_networks_train_and_evaluate(tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """``--no-share-features``: the policy and the value function each get their own feature
+    network, recorded in the run's config; the run evaluates like any other."""
+    run = tmp_path / "run"
+    code, _, err = run_cli(["rl", "train", "--out", run, "--no-share-features", *TINY], capsys)
+    assert code == 0, err
+    assert json.loads((run / "config.json").read_text())["share_features"] is False
+    from sb3_contrib import MaskablePPO
+
+    policy = MaskablePPO.load(run / "model.zip", device="cpu").policy
+    assert policy.pi_features_extractor is not policy.vf_features_extractor
+    code, _, err = run_cli(["rl", "evaluate", run, "--episodes", "1", "--no-progress"], capsys)
+    assert code == 0, err

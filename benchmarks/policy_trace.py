@@ -3,7 +3,8 @@ the policy was offered, how likely it made each allowed action, what it chose, a
 
 A diagnostic for "why does argmax play make nothing": a policy whose probabilities barely move
 with the state plays one action again and again under argmax, however well its sampled mix
-scores (BENCHMARKS.md, "Why argmax play makes 0 in the macro space").
+scores (BENCHMARKS.md, "Far sites, 10 seeds: the sparse learner, and why argmax play makes
+0").
 
     python benchmarks/policy_trace.py RUN                 # argmax, the first evaluation episode
     python benchmarks/policy_trace.py RUN --sampled --episode 3 --every 5
@@ -43,6 +44,8 @@ def main() -> None:
     ap.add_argument("--episode", type=int, default=0, help="Which evaluation episode (0-based).")
     ap.add_argument("--every", type=int, default=1, help="Print every Nth decision.")
     a = ap.parse_args()
+    if a.episode < 0 or a.every < 1:
+        raise SystemExit("policy_trace.py: --episode must be 0 or more and --every at least 1")
     torch.set_num_threads(1)
     ev._load_player(str(a.run))
     assert ev._PLAYER is not None

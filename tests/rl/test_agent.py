@@ -101,7 +101,9 @@ def test_a_policy_agent_keeps_the_macro_clock_its_run_saw(tmp_path: Path) -> Non
     import sc2data.rl  # noqa: F401
     from sc2data.game.agents import make_agent
     from sc2data.game.env import make_env
+    from sc2data.rl.obs import MACROS
 
+    n = len(MACROS)
     seen: list[np.ndarray] = []
     env = make_env("sim", seed=0)
     agent = make_agent(f"policy:{run}", seed=1)
@@ -109,7 +111,7 @@ def test_a_policy_agent_keeps_the_macro_clock_its_run_saw(tmp_path: Path) -> Non
     agent.reset()
     decide = agent._decide
     agent._decide = lambda obs, mask: (  # type: ignore[method-assign]
-        seen.append(agent.observer(obs.observation, clock=agent.clock)["vector"][-6:].copy())
+        seen.append(agent.observer(obs.observation, clock=agent.clock)["vector"][-n:].copy())
         or decide(obs, mask))
     try:
         ts = env.reset()[0]

@@ -73,9 +73,7 @@ class PolicyAgent(base_agent.BaseAgent):
         self.seed = seed
         self.observer = Observer(cfg.obs_config())
         self._macro: Iterator[actions.FunctionCall] | None = None
-        self._name = ""
         self._sent = 0
-        self._acted = False
         self.clock = MacroClock()
         """When each macro last acted, as the env's (the observation's ``history``)."""
         self.reset()
@@ -111,9 +109,8 @@ class PolicyAgent(base_agent.BaseAgent):
                 cost = self.expander.COST.get(name, 0)
                 self._macro = (self.expander.save_up(cost, macro, self.expander.PATIENCE)
                                if cost else macro)
-                self._name = name
+                self.clock.start(name)
                 self._sent = 0
-                self._acted = False
             call = next(self._macro, None)
             if call is None or not view.can(call):
                 self._macro = None
@@ -121,11 +118,7 @@ class PolicyAgent(base_agent.BaseAgent):
                     return actions.FUNCTIONS.no_op()
                 continue  # it ended after its last call: decide again on this observation
             self._sent += 1
-            if not self._acted and (self._name == "no_op"
-                                    or call.function != actions.FUNCTIONS.no_op.id):
-                self.clock.acted(MACROS.index(self._name),
-                                 int(np.asarray(obs.observation["game_loop"]).reshape(-1)[0]))
-                self._acted = True
+            self.clock.sent(call, int(np.asarray(obs.observation["game_loop"]).reshape(-1)[0]))
             return call
         return actions.FUNCTIONS.no_op()
 

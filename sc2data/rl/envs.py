@@ -79,12 +79,10 @@ from sc2data.game.env import make_env
 from sc2data.game.screen import ScreenView
 from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.vocab import SCREEN_SIZE, STEP_MUL
-from sc2data.rl.obs import PAPER_FUNCTIONS, MacroClock, ObsConfig, Observer
+from sc2data.rl.obs import MACROS, PAPER_FUNCTIONS, MacroClock, ObsConfig, Observer
 
 ACTION_SPACES: tuple[str, ...] = ("macro", "paper")
 
-MACROS: tuple[str, ...] = ReducedRandomAgent.MACROS
-"""The macro actions, in action-index order (the reduced-random agent's set)."""
 
 MAX_DECISION_STEPS = ReducedRandomAgent.PATIENCE + 4
 """Most pysc2 steps one macro decision takes: the wait for minerals, then its calls (and, with
@@ -253,13 +251,11 @@ class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
         reward = 0.0
         macro = agent.macro(name)
         cost = agent.COST.get(name, 0)
-        acted = False
+        self._clock.start(name)
         for call in agent.save_up(cost, macro, agent.PATIENCE) if cost else macro:
             if not self._view.can(call):  # type: ignore[union-attr]
                 break
-            if not acted and (name == "no_op" or call.function != NO_OP.function):
-                self._clock.acted(MACROS.index(name), self._loop())
-                acted = True
+            self._clock.sent(call, self._loop())
             reward += self._send(call)
             agent.view = self._view
             if self._ts.last():

@@ -55,7 +55,8 @@ the observation reports which of them are available; :mod:`sc2data.rl.envs` acts
 OBSERVATIONS: tuple[str, ...] = ("stored", "compact")
 
 MACROS: tuple[str, ...] = ReducedRandomAgent.MACROS
-"""The macro actions, in action-index order (:mod:`sc2data.rl.envs` acts with them)."""
+"""The macro actions, in action-index order (the reduced-random agent's set; the macro space of
+:mod:`sc2data.rl.envs` acts with them)."""
 
 UNIT_TYPES: tuple[int, ...] = (
     units.Terran.CommandCenter, units.Terran.SupplyDepot, units.Terran.Barracks,
@@ -233,9 +234,23 @@ class MacroClock:
 
     def __init__(self) -> None:
         self.last = np.full(len(MACROS), -1, np.int64)
+        self._running = -1  # the macro being played out that has not acted yet, or -1
 
     def reset(self) -> None:
         self.last[:] = -1
+        self._running = -1
+
+    def start(self, name: str) -> None:
+        """Macro ``name`` was chosen and is about to send its calls."""
+        self._running = MACROS.index(name)
+
+    def sent(self, call: actions.FunctionCall, game_loop: int) -> None:
+        """The running macro sends ``call`` on the observation of ``game_loop``: it acts now
+        unless the call is a wait (the ``no_op`` macro's own ``no_op`` is its act)."""
+        i = self._running
+        if i >= 0 and (MACROS[i] == "no_op" or call.function != actions.FUNCTIONS.no_op.id):
+            self.acted(i, game_loop)
+            self._running = -1
 
     def acted(self, macro: int, game_loop: int) -> None:
         """Macro ``macro`` (its index) sent a call on the observation of ``game_loop``."""

@@ -334,6 +334,16 @@ class MacroRulesAgent(ReducedRandomAgent):
     marine (400 loops, 50 steps) is ordered every ``50 // barracks`` steps."""
 
     def next_macro(self) -> Macro:
+        name = self.choose()
+        macro = self.macro(name)
+        cost = self.COST.get(name, 0)
+        return self.save_up(cost, macro, self.PATIENCE) if cost else macro
+
+    def choose(self) -> str:
+        """The macro its rules pick from ``self.view`` now (recorded as chosen at
+        ``self.steps``): the first of its wants that is feasible and not chosen too recently,
+        else ``no_op``. The behaviour-cloning start of ``sc2data.rl`` asks it this at each
+        decision of the macro space (:mod:`sc2data.rl.imitate`)."""
         v = self._v()
         ok = dict(zip(self.MACROS, macro_feasible(v), strict=True))
         used, cap = int(v.player[_P.food_used]), int(v.player[_P.food_cap])
@@ -352,10 +362,8 @@ class MacroRulesAgent(ReducedRandomAgent):
         for name, want in wants:
             if want and ok[name] and self._ready(name, gaps.get(name, 0)):
                 self._last[name] = self.steps
-                macro = self.macro(name)
-                cost = self.COST.get(name, 0)
-                return self.save_up(cost, macro, self.PATIENCE) if cost else macro
-        return self.no_op()
+                return name
+        return "no_op"
 
     def _ready(self, name: str, gap: int) -> bool:
         return self.steps - self._last.get(name, -gap) >= gap

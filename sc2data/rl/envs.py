@@ -222,6 +222,13 @@ class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
         funcs = np.array([i in available for i in _PAPER_IDS], dtype=bool)
         return np.concatenate([funcs, np.ones(2 * SCREEN_SIZE, dtype=bool)])
 
+    @property
+    def view(self) -> ScreenView:
+        """The latest pysc2 observation, parsed as macro agents read it (a teacher choosing
+        this env's macros: :mod:`sc2data.rl.imitate`)."""
+        assert self._view is not None, "call reset() first"
+        return self._view
+
     def close(self) -> None:
         if self._env is not None:
             self._env.close()

@@ -166,6 +166,13 @@ class RLConfig:
     # With a value function that explains nothing yet, each update is then a full clipped step
     # of noise, and a zero-reward control drifts from its initial policy
     # (tests/rl/test_control.py).
+    reward_scale: float = 1.0
+    """Multiply the reward PPO learns from by this (the curve keeps the game's marines and
+    the unscaled return)."""
+    # One clipped gradient norm (SB3's max_grad_norm 0.5) covers the value loss and the
+    # policy's: with returns of ~100 marines the value's gradient takes nearly all of it
+    # (BENCHMARKS.md, "The value loss's share of the gradient"). Engstrom et al. 2020 list
+    # reward scaling among PPO's essential details.
     share_features: bool = True
     """One feature network for the policy and the value function (SB3's default); off: one
     each (macro space)."""
@@ -192,6 +199,12 @@ class RLConfig:
     """Macro space, compact observation: the policy also sees the game time since each macro
     last acted (as pysc2's last_actions; else a builder on its way shows nowhere)."""
     # sc2data.rl.obs.MacroClock.
+    imitate: int = 0
+    """Macro space: before PPO, clone this many episodes of the macro-rules agent's play into
+    the new policy and value function (0: start from a random policy)."""
+    # sc2data.rl.imitate: a behaviour-cloning start, as AlphaStar's or kickstarting's.
+    imitate_epochs: int = 10
+    """Passes over the demonstrations when cloning (--imitate)."""
     tensorboard: bool = False
     """Also write SB3's log as TensorBoard events (RUN/logs/<session>/; needs tensorboard)."""
     progress: bool | None = None
@@ -203,7 +216,8 @@ class RLConfig:
         "gae_lambda": 0.95, "epochs": 4, "learning_rate": 3e-4, "ent_coef": 0.01,
         "ent_coef_final": None, "normalize_advantage": True, "target_kl": None, "smdp": False,
         "shaping": "event", "env_groups": 1, "merge_waits": False, "macro_sites": "random",
-        "history": False, "share_features": True}
+        "history": False, "share_features": True, "imitate": 0, "imitate_epochs": 10,
+        "reward_scale": 1.0}
     """Settings added since runs were first written, as those runs had them: a run folder whose
     ``config.json`` lacks one was trained so."""
 
@@ -247,6 +261,9 @@ def check_values(cfg: RLConfig) -> None:
             raise Sc2DataError(f"--{name.replace('_', '-')} must be at least 1")
     if cfg.episode_steps is not None and cfg.episode_steps < 1:
         raise Sc2DataError("--episode-steps must be at least 1")
+    if not (math.isfinite(cfg.reward_scale) and cfg.reward_scale > 0):
+        raise Sc2DataError(f"--reward-scale must be a positive finite number, got "
+                           f"{cfg.reward_scale}")
     if cfg.bonus is not None and not math.isfinite(cfg.bonus):
         raise Sc2DataError(f"--bonus must be a finite number, got {cfg.bonus}")
     if not (math.isfinite(cfg.threshold) and cfg.threshold > 0):
@@ -296,6 +313,9 @@ def check_values(cfg: RLConfig) -> None:
                            "policy chooses its sites)")
     if cfg.shaping != "event" and cfg.reward not in ("rules", "narration"):
         raise Sc2DataError(f"--shaping {cfg.shaping} goes with --reward rules or narration")
+    from sc2data.rl import imitate
+
+    imitate.check(cfg)
 
 
 DEVICES: tuple[str, ...] = ("auto", "cpu", "cuda")
@@ -376,7 +396,8 @@ def make_vec_env(cfg: RLConfig, scorer: Any = None, narration: Any = None) -> An
                            gamma=cfg.gamma, smdp=cfg.smdp and cfg.action_space == "macro")
     game = GameConfig(cfg.action_space, cfg.backend, cfg.obs_config(), game_loops(cfg),
                       merge_waits=cfg.merge_waits, sites=cfg.macro_sites)
-    return BuildMarinesVecEnv(game, cfg.envs, processes=cfg.processes, shaping=shaping)
+    return BuildMarinesVecEnv(game, cfg.envs, processes=cfg.processes, shaping=shaping,
+                              reward_scale=cfg.reward_scale)
 
 
 def new_model(cfg: RLConfig, vec: Any, seed: int, device: str = "cpu") -> Any:
@@ -479,7 +500,7 @@ def _forget(run: Path, whole: bool) -> None:
         shutil.rmtree(run, ignore_errors=True)
         return
     for name in (runs.CONFIG, runs.CURVE_CSV, runs.CURVE_JSON, runs.MODEL_PARTIAL,
-                 runs.CURVE_PARTIAL, runs.STATE_PARTIAL):
+                 runs.CURVE_PARTIAL, runs.STATE_PARTIAL, runs.IMITATION):
         (run / name).unlink(missing_ok=True)
     shutil.rmtree(run / runs.LOGS, ignore_errors=True)
 
@@ -511,6 +532,8 @@ def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path
             model.groups = cfg.env_groups
         else:
             model = new_model(cfg, vec, seed, device)
+            if cfg.imitate:
+                _imitate(cfg, run, model)
         model.set_logger(configure(str(run / runs.LOGS / str(state["resumes"])), formats))
         with bar(cfg.steps, desc="rl train", unit="step", show=cfg.progress) as progress:
             progress.update(state["timesteps"])
@@ -521,6 +544,19 @@ def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path
     finally:
         vec.close()
     return run
+
+
+def _imitate(cfg: RLConfig, run: Path, model: Any) -> None:
+    """The behaviour-cloning start (:mod:`sc2data.rl.imitate`), its figures in
+    ``imitation.json``."""
+    from sc2data.rl import imitate
+
+    demos = imitate.demonstrate(cfg, cfg.imitate)
+    figures = imitate.clone(model, demos, cfg.imitate_epochs, cfg.seed, cfg.reward_scale)
+    _write_json(run / runs.IMITATION, {
+        "teacher": imitate.TEACHER, "episodes": cfg.imitate, "decisions": len(demos.actions),
+        "teacher_marines": demos.marines, "epochs": cfg.imitate_epochs,
+        **{k: round(v, 6) for k, v in figures.items()}})
 
 
 def _resume_state(cfg: RLConfig, run: Path, identity: dict[str, Any]) -> dict[str, Any]:
@@ -590,7 +626,7 @@ def _curve(cfg: RLConfig, run: Path, model: Any, rows: list[dict[str, Any]],
             for i, info in enumerate(infos):
                 state["env_steps"] += int(info.get("env_steps", 1))
                 self.game[i] += float(info.get("game_reward", rewards[i]))
-                self.ret[i] += float(rewards[i])
+                self.ret[i] += float(rewards[i]) / cfg.reward_scale
                 if dones[i]:
                     self._episode_end(i, info)
             progress.update(self.num_timesteps - self.last)

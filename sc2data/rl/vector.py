@@ -276,13 +276,16 @@ class BuildMarinesVecEnv(VecEnv):
     """
 
     def __init__(self, cfg: GameConfig, n: int, *, processes: int | None = None,
-                 shaping: Any = None) -> None:
+                 shaping: Any = None, reward_scale: float = 1.0) -> None:
         if n < 1:
             raise Sc2DataError("--envs must be at least 1")
         if shaping is not None and cfg.frames is None and shaping.schema is not None:
             cfg = dataclasses.replace(cfg, frames=shaping.schema)
         self.game_weight = float(getattr(shaping, "game_weight", 1.0))
         self.cfg, self.shaping = cfg, shaping
+        self.reward_scale = float(reward_scale)
+        """What the learner's reward is multiplied by (infos keep the game's and the bonus's
+        own figures)."""
         k = default_processes(n) if processes is None else int(processes)
         if k < 0:
             raise Sc2DataError("--processes must be 0 or more")
@@ -445,7 +448,8 @@ class BuildMarinesVecEnv(VecEnv):
                 info["terminal_observation"] = {k: a[f"final/{k}"][i].copy()
                                                 for k in self.obs_keys}
             infos.append(info)
-        return self._obs(lo, hi), (game + extra).astype(np.float32), done, infos
+        reward = (game + extra) * self.reward_scale
+        return self._obs(lo, hi), reward.astype(np.float32), done, infos
 
     def _obs(self, lo: int = 0, hi: int | None = None) -> dict[str, np.ndarray]:
         # Copies: SB3 keeps the last observation while the next step overwrites the arrays.

@@ -342,8 +342,8 @@ class MacroRulesAgent(ReducedRandomAgent):
     def choose(self) -> str:
         """The macro its rules pick from ``self.view`` now (recorded as chosen at
         ``self.steps``): the first of its wants that is feasible and not chosen too recently,
-        else ``no_op``. The behaviour-cloning start of ``sc2data.rl`` asks it this at each
-        decision of the macro space (:mod:`sc2data.rl.imitate`)."""
+        else ``no_op``. ``benchmarks/ppo_gradients.py`` asks it this at each decision of the
+        macro space's env."""
         v = self._v()
         ok = dict(zip(self.MACROS, macro_feasible(v), strict=True))
         used, cap = int(v.player[_P.food_used]), int(v.player[_P.food_cap])

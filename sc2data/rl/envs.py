@@ -224,8 +224,9 @@ class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
 
     @property
     def view(self) -> ScreenView:
-        """The latest pysc2 observation, parsed as macro agents read it (a teacher choosing
-        this env's macros: :mod:`sc2data.rl.imitate`)."""
+        """The latest pysc2 observation, parsed as macro agents read it (for an agent that
+        chooses this env's macros, as ``benchmarks/ppo_gradients.py`` has the macro-rules
+        agent do)."""
         assert self._view is not None, "call reset() first"
         return self._view
 

@@ -12,9 +12,6 @@
   their sha256, then each is renamed into place, ``state.json`` last. A stop anywhere leaves either
   the previous checkpoint or the new one (:func:`recover` finishes or discards a commit it finds
   half done), so a resume never pairs a model with another checkpoint's count or curve.
-* ``imitation.json`` (with ``--imitate``): the behaviour-cloning start's teacher, episodes,
-  decisions, the teacher's marines and how well the cloned policy fits them
-  (:mod:`sc2data.rl.imitate`); written before the first checkpoint.
 * ``logs/<resume>/progress.csv`` (and TensorBoard events with ``--tensorboard``): SB3's logger,
   PPO's own figures per update (losses, entropy, approximate KL, clip fraction, explained
   variance) beside the game's score, one folder per training session.
@@ -46,7 +43,6 @@ MODEL = "model.zip"
 CURVE_CSV = "curve.csv"
 CURVE_JSON = "curve.json"
 LOGS = "logs"
-IMITATION = "imitation.json"
 MODEL_PARTIAL = "model.partial.zip"
 CURVE_PARTIAL = "curve.partial.csv"
 STATE_PARTIAL = "state.partial.json"

@@ -199,12 +199,6 @@ class RLConfig:
     """Macro space, compact observation: the policy also sees the game time since each macro
     last acted (as pysc2's last_actions; else a builder on its way shows nowhere)."""
     # sc2data.rl.obs.MacroClock.
-    imitate: int = 0
-    """Macro space: before PPO, clone this many episodes of the macro-rules agent's play into
-    the new policy and value function (0: start from a random policy)."""
-    # sc2data.rl.imitate: a behaviour-cloning start, as AlphaStar's or kickstarting's.
-    imitate_epochs: int = 10
-    """Passes over the demonstrations when cloning (--imitate)."""
     tensorboard: bool = False
     """Also write SB3's log as TensorBoard events (RUN/logs/<session>/; needs tensorboard)."""
     progress: bool | None = None
@@ -216,8 +210,7 @@ class RLConfig:
         "gae_lambda": 0.95, "epochs": 4, "learning_rate": 3e-4, "ent_coef": 0.01,
         "ent_coef_final": None, "normalize_advantage": True, "target_kl": None, "smdp": False,
         "shaping": "event", "env_groups": 1, "merge_waits": False, "macro_sites": "random",
-        "history": False, "share_features": True, "imitate": 0, "imitate_epochs": 10,
-        "reward_scale": 1.0}
+        "history": False, "share_features": True, "reward_scale": 1.0}
     """Settings added since runs were first written, as those runs had them: a run folder whose
     ``config.json`` lacks one was trained so."""
 
@@ -313,9 +306,6 @@ def check_values(cfg: RLConfig) -> None:
                            "policy chooses its sites)")
     if cfg.shaping != "event" and cfg.reward not in ("rules", "narration"):
         raise Sc2DataError(f"--shaping {cfg.shaping} goes with --reward rules or narration")
-    from sc2data.rl import imitate
-
-    imitate.check(cfg)
 
 
 DEVICES: tuple[str, ...] = ("auto", "cpu", "cuda")
@@ -500,7 +490,7 @@ def _forget(run: Path, whole: bool) -> None:
         shutil.rmtree(run, ignore_errors=True)
         return
     for name in (runs.CONFIG, runs.CURVE_CSV, runs.CURVE_JSON, runs.MODEL_PARTIAL,
-                 runs.CURVE_PARTIAL, runs.STATE_PARTIAL, runs.IMITATION):
+                 runs.CURVE_PARTIAL, runs.STATE_PARTIAL):
         (run / name).unlink(missing_ok=True)
     shutil.rmtree(run / runs.LOGS, ignore_errors=True)
 
@@ -532,8 +522,6 @@ def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path
             model.groups = cfg.env_groups
         else:
             model = new_model(cfg, vec, seed, device)
-            if cfg.imitate:
-                _imitate(cfg, run, model)
         model.set_logger(configure(str(run / runs.LOGS / str(state["resumes"])), formats))
         with bar(cfg.steps, desc="rl train", unit="step", show=cfg.progress) as progress:
             progress.update(state["timesteps"])
@@ -544,19 +532,6 @@ def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path
     finally:
         vec.close()
     return run
-
-
-def _imitate(cfg: RLConfig, run: Path, model: Any) -> None:
-    """The behaviour-cloning start (:mod:`sc2data.rl.imitate`), its figures in
-    ``imitation.json``."""
-    from sc2data.rl import imitate
-
-    demos = imitate.demonstrate(cfg, cfg.imitate)
-    figures = imitate.clone(model, demos, cfg.imitate_epochs, cfg.seed, cfg.reward_scale)
-    _write_json(run / runs.IMITATION, {
-        "teacher": imitate.TEACHER, "episodes": cfg.imitate, "decisions": len(demos.actions),
-        "teacher_marines": demos.marines, "epochs": cfg.imitate_epochs,
-        **{k: round(v, 6) for k, v in figures.items()}})
 
 
 def _resume_state(cfg: RLConfig, run: Path, identity: dict[str, Any]) -> dict[str, Any]:

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+from sc2data.rl.runs import read_curve
 from tests.cli import assert_one_line_error, run_cli
 
 TINY = ["--steps", "96", "--envs", "1", "--rollout", "32", "--batch-size", "32",
@@ -128,6 +129,8 @@ def test_narration_training_with_a_tiny_mem(mem_run: Path, tmp_path: Path,
     (["--ent-coef-final", "-0.01"], ("--ent-coef-final", "0 or more")),
     (["--ent-coef-final", "inf"], ("--ent-coef-final", "finite")),
     (["--mem", "x"], ("--reward narration",)),
+    (["--reward-scale", "0"], ("--reward-scale", "positive")),
+    (["--reward-scale", "nan"], ("--reward-scale", "positive")),
     (["--shaping", "dense"], ("unknown shaping", "potential")),
     (["--shaping", "potential"], ("--shaping potential", "--reward rules or narration")),
 ])
@@ -252,3 +255,24 @@ def test_separate_feature_networks_train_and_evaluate(tmp_path: Path,
     assert policy.pi_features_extractor is not policy.vf_features_extractor
     code, _, err = run_cli(["rl", "evaluate", run, "--episodes", "1", "--no-progress"], capsys)
     assert code == 0, err
+
+
+def test_a_scaled_reward_keeps_the_records_in_the_games_units(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--reward-scale``: PPO learns from the scaled reward, while the curve records the game's
+    marines and the unscaled return — before the first update the same seed plays the same
+    episodes whatever the scale, so their rows are equal."""
+    rows = {}
+    for scale in ("1", "0.01"):
+        run = tmp_path / scale
+        code, _, err = run_cli(["rl", "train", "--out", run, "--reward", "rules",
+                                "--shaping", "event", "--envs", "2", "--rollout", "64",
+                                "--steps", "128", "--episode-steps", "60", "--processes", "0",
+                                "--reward-scale", scale, "--no-progress"], capsys)
+        assert code == 0, err
+        assert json.loads((run / "config.json").read_text())["reward_scale"] == float(scale)
+        rows[scale] = [r for r in read_curve(run) if r["timesteps"] <= 128]
+    assert rows["1"] and len(rows["1"]) == len(rows["0.01"])
+    for a, b in zip(rows["1"], rows["0.01"]):
+        assert a == pytest.approx(b, abs=1e-4)
+    assert any(r["return"] != r["game_return"] for r in rows["1"])  # the bonus is in "return"

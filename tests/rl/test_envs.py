@@ -214,3 +214,26 @@ def test_history_is_for_the_compact_macro_observation() -> None:
         BuildMarinesGym("paper", obs=ObsConfig("compact", history=True))
     with pytest.raises(Sc2DataError, match="--history needs --obs compact"):
         BuildMarinesGym("macro", obs=ObsConfig("stored", history=True))
+
+
+def test_the_macro_rules_agent_chooses_the_envs_macros() -> None:
+    """``env.view`` is what a macro agent reads: the macro-rules agent, asked at each decision
+    which macro it would start (``choose``), plays the far-site macro env to its own level
+    (119–123 marines on its own episodes), and only ever picks an allowed macro."""
+    from sc2data.game.agents import MacroRulesAgent
+    from sc2data.ground.vocab import STEP_MUL
+    from sc2data.rl.obs import MACROS
+
+    env = BuildMarinesGym("macro", obs="compact", merge_waits=True, sites="far")
+    agent = MacroRulesAgent(0, sites="far")
+    _, info = env.reset(seed=5)
+    done = False
+    try:
+        while not done:
+            agent.view, agent.steps = env.view, info["game_loop"] // STEP_MUL
+            action = MACROS.index(agent.choose())
+            assert env.action_masks()[action]
+            _, _, done, _, info = env.step(action)
+    finally:
+        env.close()
+    assert info["marines"] >= 100

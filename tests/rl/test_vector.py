@@ -3,6 +3,7 @@ wrappers, SB3 and gymnasium contracts, shared memory that never outlives its pro
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import signal
@@ -320,3 +321,30 @@ def test_a_reward_that_reads_frames_keeps_the_games_settings(mem_run: Path) -> N
         assert vec.cfg.game_loops == STEPS * 8
     finally:
         vec.close()
+
+
+def test_reward_scale_scales_what_the_learner_gets_and_nothing_else() -> None:
+    """``reward_scale``: the rewards PPO reads are the game's and the bonus's times the scale;
+    the games, their infos (the game's reward, the bonus) and observations do not change."""
+    base = RLConfig(out="unused", reward="rules", shaping="event", episode_steps=STEPS, envs=2,
+                    processes=0, obs="compact")
+    envs = [make_vec_env(base), make_vec_env(dataclasses.replace(base, reward_scale=0.25))]
+    rng = np.random.default_rng(0)
+    paid = 0.0
+    try:
+        for env in envs:
+            env.seed(3)
+        a, b = (env.reset() for env in envs)
+        for _ in range(120):
+            acts = _masked_actions(envs[0].action_masks(), "macro", rng)
+            a, ra, _, ia = envs[0].step(acts)
+            b, rb, _, ib = envs[1].step(acts)
+            assert all((a[k] == b[k]).all() for k in a)
+            assert rb == pytest.approx(0.25 * ra)
+            for x, y in zip(ia, ib):
+                assert (x["game_reward"], x["shaping"]) == (y["game_reward"], y["shaping"])
+            paid += float(np.abs(ra).sum())
+    finally:
+        for env in envs:
+            env.close()
+    assert paid > 0

@@ -1,0 +1,156 @@
+"""How much of PPO's clipped gradient is the value loss's: a macro-space run's policy at its start
+and at its end, on the states of the macro-rules agent's play.
+
+SB3's PPO clips one gradient norm (``max_grad_norm`` 0.5) over the policy loss, the entropy bonus
+and ``vf_coef`` × the value loss together. When the value's part is much the larger, clipping
+shrinks the policy's step with it. This script measures, per minibatch of 256 decisions, the
+norm of each part's gradient at the start of an update (probability ratio 1), the factor the
+clip multiplies the step by, and so the policy's share of what moves the weights — for the
+run's own ``--reward-scale`` and, for the initial policy, others given with ``--scales``.
+
+The states are the macro-rules agent's on the run's env (:func:`demonstrate`: the agent asked
+at each decision which macro it would start, the env playing it) and the trained policy's own
+(sampled), on episodes seeded apart from training and evaluation; the advantages are the
+discounted game returns from each decision less the value's estimate, normalised per minibatch
+(``--normalize-advantage``).
+
+    python benchmarks/ppo_gradients.py RUN [--episodes 2] [--scales 1 0.01]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from sc2data.game.agents import MacroRulesAgent
+from sc2data.ground.vocab import STEP_MUL
+from sc2data.rl import runs
+from sc2data.rl.envs import BuildMarinesGym
+from sc2data.rl.obs import MACROS
+from sc2data.rl.train import RLConfig, game_loops, load_config, make_vec_env, new_model
+
+DEMO_SEED = 500_000_000
+"""Episode ``e`` resets the env with ``DEMO_SEED + e`` (training seeds lie below 1,000,000,
+evaluation's from 1,000,000)."""
+
+
+@dataclasses.dataclass
+class Demonstrations:
+    """The macro-rules agent's decisions on the run's env, each key stacked ``(n, …)``."""
+
+    obs: dict[str, np.ndarray]
+    masks: np.ndarray
+    actions: np.ndarray
+    returns: np.ndarray
+    """The game's return from each decision on, γ per pysc2 step (``--smdp``) or per decision."""
+    marines: list[int]
+
+
+def demonstrate(cfg: RLConfig, episodes: int, model: Any = None) -> Demonstrations:
+    """Play ``episodes`` of the run's macro-space env with the macro-rules agent choosing, or
+    ``model``'s policy (sampled) when given."""
+    env = BuildMarinesGym("macro", backend=cfg.backend, obs=cfg.obs_config(),
+                          game_loops=game_loops(cfg), merge_waits=cfg.merge_waits,
+                          sites=cfg.macro_sites)
+    agent = MacroRulesAgent(0, sites=cfg.macro_sites)
+    obs, masks, chosen, returns, marines = [], [], [], [], []
+    try:
+        for e in range(episodes):
+            o, info = env.reset(seed=DEMO_SEED + e)
+            agent.reset()
+            if model is not None:
+                model.set_random_seed(DEMO_SEED + e)
+            rewards, steps, done = [], [], False
+            while not done:
+                if model is None:
+                    agent.view, agent.steps = env.view, info["game_loop"] // STEP_MUL
+                    action = MACROS.index(agent.choose())
+                else:
+                    action = int(model.predict(o, action_masks=env.action_masks())[0])
+                obs.append(o)
+                masks.append(env.action_masks())
+                chosen.append(action)
+                o, reward, done, _, info = env.step(action)
+                rewards.append(float(reward))
+                steps.append(int(info["env_steps"]) if cfg.smdp else 1)
+            g, back = 0.0, []
+            for r, k in zip(reversed(rewards), reversed(steps), strict=True):
+                g = r + cfg.gamma ** k * g
+                back.append(g)
+            returns += back[::-1]
+            marines.append(int(info["marines"]))
+    finally:
+        env.close()
+    return Demonstrations({k: np.stack([x[k] for x in obs]) for k in obs[0]}, np.stack(masks),
+                          np.asarray(chosen, np.int64), np.asarray(returns, np.float32), marines)
+
+
+def norm(loss: torch.Tensor, params: list[torch.nn.Parameter]) -> float:
+    grads = torch.autograd.grad(loss, params, retain_graph=True, allow_unused=True)
+    return float(torch.sqrt(sum((g ** 2).sum() for g in grads if g is not None)))
+
+
+def shares(model: object, demos: Demonstrations, scale: float,
+           batch: int = 256) -> dict[str, float]:
+    """Median over minibatches of each part's gradient norm and the clip's factor."""
+    policy = model.policy  # type: ignore[attr-defined]
+    params = [p for p in policy.parameters() if p.requires_grad]
+    rows = []
+    order = np.random.default_rng(0).permutation(len(demos.actions))
+    for idx in np.array_split(order, max(1, len(order) // batch)):
+        obs = {k: torch.as_tensor(v[idx]).float() for k, v in demos.obs.items()}
+        values, log_prob, entropy = policy.evaluate_actions(
+            obs, torch.as_tensor(demos.actions[idx]), action_masks=demos.masks[idx])
+        values = values.flatten()
+        target = torch.as_tensor(demos.returns[idx] * scale)
+        adv = target - values.detach()
+        adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+        ratio = torch.exp(log_prob - log_prob.detach())
+        pg = -(adv * ratio).mean() - model.ent_coef * entropy.mean()  # type: ignore[attr-defined]
+        vf = model.vf_coef * torch.nn.functional.mse_loss(values, target)  # type: ignore[attr-defined]
+        g_pi, g_vf, g_all = norm(pg, params), norm(vf, params), norm(pg + vf, params)
+        clip = min(1.0, model.max_grad_norm / g_all)  # type: ignore[attr-defined]
+        rows.append((g_pi, g_vf, g_all, clip, g_pi * clip))
+    med = np.median(np.array(rows), axis=0)
+    return dict(zip(("policy", "value", "total", "clip", "policy_after_clip"),
+                    (float(x) for x in med)))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("run", type=Path)
+    ap.add_argument("--episodes", type=int, default=2)
+    ap.add_argument("--scales", type=float, nargs="*", default=[])
+    args = ap.parse_args()
+    cfg = dataclasses.replace(load_config(args.run), envs=1, processes=0, reward="sparse",
+                              mem=None, narration=None)
+    vec = make_vec_env(cfg)
+    try:
+        models = {"initial": new_model(cfg, vec, cfg.seed),
+                  "trained": runs.load_model(args.run, vec)}
+        states = {"the rules'": demonstrate(cfg, args.episodes),
+                  "the trained policy's": demonstrate(cfg, args.episodes, models["trained"])}
+        for name, demos in states.items():
+            print(f"{name} states: {len(demos.actions)} decisions, "
+                  f"{np.mean(demos.marines):.1f} marines an episode; returns up to "
+                  f"{demos.returns.max():.1f}")
+        print("| policy | states | reward scale | ‖∇ policy loss‖ | ‖∇ value loss‖ | clip factor "
+              "| policy's step after the clip |")
+        print("| --- | --- | ---: | ---: | ---: | ---: | ---: |")
+        for name, model in models.items():  # a trained value predicts its own scale only
+            for where, demos in states.items():
+                for scale in [cfg.reward_scale, *(args.scales if name == "initial" else [])]:
+                    s = shares(model, demos, scale)
+                    print(f"| {name} | {where} | {scale:g} | {s['policy']:.3f} | "
+                          f"{s['value']:.3f} | {s['clip']:.4f} | {s['policy_after_clip']:.4f} |")
+    finally:
+        vec.close()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,5 +1,5 @@
-"""How much of PPO's clipped gradient is the value loss's: a macro-space run's policy at its start
-and at its end, on the states of the macro-rules agent's play.
+"""How much of PPO's clipped gradient is the value loss's: a run's policy at its start and at its
+end, on the trained policy's own states (and, in the macro space, the macro-rules agent's).
 
 SB3's PPO clips one gradient norm (``max_grad_norm`` 0.5) over the policy loss, the entropy bonus
 and ``vf_coef`` × the value loss together. When the value's part is much the larger, clipping
@@ -8,11 +8,11 @@ norm of each part's gradient at the start of an update (probability ratio 1), th
 clip multiplies the step by, and so the policy's share of what moves the weights — for the
 run's own ``--reward-scale`` and, for the initial policy, others given with ``--scales``.
 
-The states are the macro-rules agent's on the run's env (:func:`demonstrate`: the agent asked
-at each decision which macro it would start, the env playing it) and the trained policy's own
-(sampled), on episodes seeded apart from training and evaluation; the advantages are the
-discounted game returns from each decision less the value's estimate, normalised per minibatch
-(``--normalize-advantage``).
+The states are the trained policy's own (sampled) and, in the macro space, the macro-rules
+agent's on the run's env (:func:`demonstrate`: the agent asked at each decision which macro it
+would start, the env playing it), on episodes seeded apart from training and evaluation; the
+advantages are the discounted game returns from each decision less the value's estimate,
+normalised per minibatch where the run does (``--normalize-advantage``).
 
     python benchmarks/ppo_gradients.py RUN [--episodes 2] [--scales 1 0.01]
 """
@@ -41,7 +41,7 @@ evaluation's from 1,000,000)."""
 
 @dataclasses.dataclass
 class Demonstrations:
-    """The macro-rules agent's decisions on the run's env, each key stacked ``(n, …)``."""
+    """An agent's decisions on the run's env, each key stacked ``(n, …)``."""
 
     obs: dict[str, np.ndarray]
     masks: np.ndarray
@@ -52,9 +52,9 @@ class Demonstrations:
 
 
 def demonstrate(cfg: RLConfig, episodes: int, model: Any = None) -> Demonstrations:
-    """Play ``episodes`` of the run's macro-space env with the macro-rules agent choosing, or
+    """Play ``episodes`` of the run's env with the macro-rules agent choosing (macro space), or
     ``model``'s policy (sampled) when given."""
-    env = BuildMarinesGym("macro", backend=cfg.backend, obs=cfg.obs_config(),
+    env = BuildMarinesGym(cfg.action_space, backend=cfg.backend, obs=cfg.obs_config(),
                           game_loops=game_loops(cfg), merge_waits=cfg.merge_waits,
                           sites=cfg.macro_sites)
     agent = MacroRulesAgent(0, sites=cfg.macro_sites)
@@ -71,7 +71,7 @@ def demonstrate(cfg: RLConfig, episodes: int, model: Any = None) -> Demonstratio
                     agent.view, agent.steps = env.view, info["game_loop"] // STEP_MUL
                     action = MACROS.index(agent.choose())
                 else:
-                    action = int(model.predict(o, action_masks=env.action_masks())[0])
+                    action = model.predict(o, action_masks=env.action_masks())[0]
                 obs.append(o)
                 masks.append(env.action_masks())
                 chosen.append(action)
@@ -109,7 +109,8 @@ def shares(model: object, demos: Demonstrations, scale: float,
         values = values.flatten()
         target = torch.as_tensor(demos.returns[idx] * scale)
         adv = target - values.detach()
-        adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+        if model.normalize_advantage:  # type: ignore[attr-defined]
+            adv = (adv - adv.mean()) / (adv.std() + 1e-8)
         ratio = torch.exp(log_prob - log_prob.detach())
         pg = -(adv * ratio).mean() - model.ent_coef * entropy.mean()  # type: ignore[attr-defined]
         vf = model.vf_coef * torch.nn.functional.mse_loss(values, target)  # type: ignore[attr-defined]
@@ -133,8 +134,9 @@ def main() -> None:
     try:
         models = {"initial": new_model(cfg, vec, cfg.seed),
                   "trained": runs.load_model(args.run, vec)}
-        states = {"the rules'": demonstrate(cfg, args.episodes),
-                  "the trained policy's": demonstrate(cfg, args.episodes, models["trained"])}
+        states = {"the trained policy's": demonstrate(cfg, args.episodes, models["trained"])}
+        if cfg.action_space == "macro":
+            states = {"the rules'": demonstrate(cfg, args.episodes), **states}
         for name, demos in states.items():
             print(f"{name} states: {len(demos.actions)} decisions, "
                   f"{np.mean(demos.marines):.1f} marines an episode; returns up to "

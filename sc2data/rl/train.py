@@ -173,6 +173,13 @@ class RLConfig:
     # policy's: with returns of ~100 marines the value's gradient takes nearly all of it
     # (BENCHMARKS.md, "The value loss's share of the gradient"). Engstrom et al. 2020 list
     # reward scaling among PPO's essential details.
+    vf_coef: float = 0.5
+    """Weight of the value loss in PPO's loss (SB3's default)."""
+    max_grad_norm: float = 0.5
+    """Norm the gradient of PPO's whole loss (policy, entropy, value) is clipped to (SB3's
+    default)."""
+    # With the game's reward the value's part of that one norm is 10–1,000× the policy's
+    # (benchmarks/ppo_gradients.py; BENCHMARKS.md, "The value loss's share of the gradient").
     share_features: bool = True
     """One feature network for the policy and the value function (SB3's default); off: one
     each (macro space)."""
@@ -257,6 +264,10 @@ def check_values(cfg: RLConfig) -> None:
     if not (math.isfinite(cfg.reward_scale) and cfg.reward_scale > 0):
         raise Sc2DataError(f"--reward-scale must be a positive finite number, got "
                            f"{cfg.reward_scale}")
+    for name in ("vf_coef", "max_grad_norm"):
+        if not (math.isfinite(getattr(cfg, name)) and getattr(cfg, name) > 0):
+            raise Sc2DataError(f"--{name.replace('_', '-')} must be a positive finite number, "
+                               f"got {getattr(cfg, name)}")
     if cfg.bonus is not None and not math.isfinite(cfg.bonus):
         raise Sc2DataError(f"--bonus must be a finite number, got {cfg.bonus}")
     if not (math.isfinite(cfg.threshold) and cfg.threshold > 0):
@@ -401,6 +412,7 @@ def new_model(cfg: RLConfig, vec: Any, seed: int, device: str = "cpu") -> Any:
         n_epochs=cfg.epochs, learning_rate=cfg.learning_rate, gamma=cfg.gamma,
         gae_lambda=cfg.gae_lambda,
         ent_coef=cfg.ent_coef, normalize_advantage=cfg.normalize_advantage,
+        vf_coef=cfg.vf_coef, max_grad_norm=cfg.max_grad_norm,
         target_kl=cfg.target_kl, seed=seed, device=device, verbose=0,
         rollout_buffer_class=SMDPRolloutBuffer if cfg.smdp else None,
         policy_kwargs=policy_kwargs(cfg))

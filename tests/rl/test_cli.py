@@ -131,6 +131,9 @@ def test_narration_training_with_a_tiny_mem(mem_run: Path, tmp_path: Path,
     (["--mem", "x"], ("--reward narration",)),
     (["--reward-scale", "0"], ("--reward-scale", "positive")),
     (["--reward-scale", "nan"], ("--reward-scale", "positive")),
+    (["--vf-coef", "0"], ("--vf-coef", "positive")),
+    (["--max-grad-norm", "-1"], ("--max-grad-norm", "positive")),
+    (["--max-grad-norm", "inf"], ("--max-grad-norm", "positive")),
     (["--shaping", "dense"], ("unknown shaping", "potential")),
     (["--shaping", "potential"], ("--shaping potential", "--reward rules or narration")),
 ])
@@ -244,14 +247,20 @@ def test_cuda_without_a_gpu_is_one_line(tmp_path: Path, capsys: pytest.CaptureFi
 def test_separate_feature_networks_train_and_evaluate(tmp_path: Path,
                                                       capsys: pytest.CaptureFixture[str]) -> None:
     """``--no-share-features``: the policy and the value function each get their own feature
-    network, recorded in the run's config; the run evaluates like any other."""
+    network, recorded in the run's config; the run evaluates like any other. ``--vf-coef`` and
+    ``--max-grad-norm`` reach PPO and the record too."""
     run = tmp_path / "run"
-    code, _, err = run_cli(["rl", "train", "--out", run, "--no-share-features", *TINY], capsys)
+    code, _, err = run_cli(["rl", "train", "--out", run, "--no-share-features",
+                            "--vf-coef", "0.25", "--max-grad-norm", "2", *TINY], capsys)
     assert code == 0, err
-    assert json.loads((run / "config.json").read_text())["share_features"] is False
+    config = json.loads((run / "config.json").read_text())
+    assert (config["share_features"], config["vf_coef"], config["max_grad_norm"]) == (
+        False, 0.25, 2.0)
     from sb3_contrib import MaskablePPO
 
-    policy = MaskablePPO.load(run / "model.zip", device="cpu").policy
+    model = MaskablePPO.load(run / "model.zip", device="cpu")
+    assert (model.vf_coef, model.max_grad_norm) == (0.25, 2.0)
+    policy = model.policy
     assert policy.pi_features_extractor is not policy.vf_features_extractor
     code, _, err = run_cli(["rl", "evaluate", run, "--episodes", "1", "--no-progress"], capsys)
     assert code == 0, err

@@ -169,8 +169,8 @@ class RLConfig:
     reward_scale: float = 1.0
     """Multiply the reward PPO learns from by this (the curve keeps the game's marines and
     the unscaled return)."""
-    # One clipped gradient norm (SB3's max_grad_norm 0.5) covers the value loss and the
-    # policy's: with returns of ~100 marines the value's gradient takes nearly all of it
+    # One clipped gradient norm (--max-grad-norm) covers the value loss and the policy's: with
+    # the game's returns (tens of marines) the value's gradient takes nearly all of it
     # (BENCHMARKS.md, "The value loss's share of the gradient"). Engstrom et al. 2020 list
     # reward scaling among PPO's essential details.
     vf_coef: float = 0.5
@@ -217,7 +217,8 @@ class RLConfig:
         "gae_lambda": 0.95, "epochs": 4, "learning_rate": 3e-4, "ent_coef": 0.01,
         "ent_coef_final": None, "normalize_advantage": True, "target_kl": None, "smdp": False,
         "shaping": "event", "env_groups": 1, "merge_waits": False, "macro_sites": "random",
-        "history": False, "share_features": True, "reward_scale": 1.0}
+        "history": False, "share_features": True, "reward_scale": 1.0,
+        "vf_coef": 0.5, "max_grad_norm": 0.5}
     """Settings added since runs were first written, as those runs had them: a run folder whose
     ``config.json`` lacks one was trained so."""
 

@@ -289,3 +289,18 @@ def test_shaping_defaults_to_the_experiments_choice_per_reward(tmp_path: Path) -
     assert RLConfig(out="r").shaping == "event"  # sparse: no bonus to pay
     assert RLConfig(out="r", reward="rules", shaping="event").shaping == "event"
     assert RLConfig(out="r", reward="rules").identity()["shaping"] == "potential"
+
+
+def test_runs_written_before_the_reward_scale_and_clip_settings_read_as_trained(
+        tmp_path: Path) -> None:
+    """A run whose config predates ``--reward-scale``, ``--vf-coef`` and ``--max-grad-norm``
+    was trained at the game's scale with SB3's 0.5 and 0.5."""
+    from sc2data.rl.train import load_config
+
+    run = fake_run(tmp_path / "old", [1, 2], action_space="macro")
+    config = json.loads((run / "config.json").read_text())
+    for key in ("reward_scale", "vf_coef", "max_grad_norm"):
+        config.pop(key, None)
+    _write_json(run / "config.json", config)
+    cfg = load_config(run)
+    assert (cfg.reward_scale, cfg.vf_coef, cfg.max_grad_norm) == (1.0, 0.5, 0.5)

@@ -1,9 +1,9 @@
 """How much of PPO's clipped gradient is the value loss's: a run's policy at its start and at its
 end, on the trained policy's own states (and, in the macro space, the macro-rules agent's).
 
-SB3's PPO clips one gradient norm (``max_grad_norm`` 0.5) over the policy loss, the entropy bonus
-and ``vf_coef`` × the value loss together. When the value's part is much the larger, clipping
-shrinks the policy's step with it. This script measures, per minibatch of 256 decisions, the
+SB3's PPO clips one gradient norm (``--max-grad-norm``, 0.5 by default) over the policy loss, the
+entropy bonus and ``--vf-coef`` × the value loss together. When the value's part is much the
+larger, clipping shrinks the policy's step with it. This script measures, per minibatch of 256 decisions, the
 norm of each part's gradient at the start of an update (probability ratio 1), the factor the
 clip multiplies the step by, and so the policy's share of what moves the weights — for the
 run's own ``--reward-scale`` and, for the initial policy, others given with ``--scales``.
@@ -28,6 +28,7 @@ import numpy as np
 import torch
 
 from sc2data.game.agents import MacroRulesAgent
+from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.vocab import STEP_MUL
 from sc2data.rl import runs
 from sc2data.rl.envs import BuildMarinesGym
@@ -128,7 +129,14 @@ def main() -> None:
     ap.add_argument("--episodes", type=int, default=2)
     ap.add_argument("--scales", type=float, nargs="*", default=[])
     args = ap.parse_args()
-    cfg = dataclasses.replace(load_config(args.run), envs=1, processes=0, reward="sparse",
+    if args.episodes < 1 or any(not 0 < x < float("inf") for x in args.scales):
+        raise SystemExit("ppo_gradients.py: --episodes must be at least 1 and --scales positive")
+    try:
+        cfg = load_config(args.run)
+    except Sc2DataError as e:
+        raise SystemExit(f"ppo_gradients.py: {e}") from None
+    # The game's reward only: the returns are the game's whatever the run was shaped with.
+    cfg = dataclasses.replace(cfg, envs=1, processes=0, reward="sparse", shaping="event",
                               mem=None, narration=None)
     vec = make_vec_env(cfg)
     try:

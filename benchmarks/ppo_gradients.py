@@ -5,8 +5,9 @@ SB3's PPO clips one gradient norm (``--max-grad-norm``, 0.5 by default) over the
 entropy bonus and ``--vf-coef`` × the value loss together. When the value's part is much the
 larger, clipping shrinks the policy's step with it. This script measures, per minibatch of 256
 decisions, the norm of each part's gradient at the start of an update (probability ratio 1), the
-factor the clip multiplies the step by, and so the policy's share of what moves the weights — for the
-run's own ``--reward-scale`` and, for the initial policy, others given with ``--scales``.
+factor the clip multiplies the step by, and so the policy's share of what moves the weights —
+for the run's own ``--reward-scale`` and, for the initial policy, others given with
+``--scales``.
 
 The states are the trained policy's own (sampled) and, in the macro space, the macro-rules
 agent's on the run's env (:func:`demonstrate`: the agent asked at each decision which macro it

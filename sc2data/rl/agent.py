@@ -93,6 +93,7 @@ class PolicyAgent(base_agent.BaseAgent):
     def step(self, obs: Any) -> actions.FunctionCall:
         super().step(obs)
         from sc2data.rl.envs import MACROS, macro_feasible, paper_call
+        from sc2data.rl.obs import game_loop
 
         view = ScreenView(obs)
         if self.cfg.action_space == "paper":
@@ -118,7 +119,7 @@ class PolicyAgent(base_agent.BaseAgent):
                     return actions.FUNCTIONS.no_op()
                 continue  # it ended after its last call: decide again on this observation
             self._sent += 1
-            self.clock.sent(call, int(np.asarray(obs.observation["game_loop"]).reshape(-1)[0]))
+            self.clock.sent(call, game_loop(obs.observation))
             return call
         return actions.FUNCTIONS.no_op()
 

@@ -79,7 +79,14 @@ from sc2data.game.env import make_env
 from sc2data.game.screen import ScreenView
 from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.vocab import SCREEN_SIZE, STEP_MUL
-from sc2data.rl.obs import MACROS, PAPER_FUNCTIONS, MacroClock, ObsConfig, Observer
+from sc2data.rl.obs import (
+    MACROS,
+    PAPER_FUNCTIONS,
+    MacroClock,
+    ObsConfig,
+    Observer,
+    game_loop,
+)
 
 ACTION_SPACES: tuple[str, ...] = ("macro", "paper")
 
@@ -286,7 +293,7 @@ class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
         return self.observer(self._ts.observation, clock=self._clock)
 
     def _loop(self) -> int:
-        return int(np.asarray(self._ts.observation["game_loop"]).reshape(-1)[0])
+        return game_loop(self._ts.observation)
 
     def _marines(self) -> int:
         """The game's score so far: marines made this episode (``score_cumulative.score``)."""

@@ -181,7 +181,7 @@ class Observer:
         if self.cfg.history:
             if clock is None:
                 raise ValueError("an observation with history needs the episode's MacroClock")
-            dest["vector"][-len(MACROS):] = clock.features(_loop(obs))
+            dest["vector"][-len(MACROS):] = clock.features(game_loop(obs))
         return dest
 
     # -- compact ---------------------------------------------------------------------------------
@@ -215,7 +215,7 @@ class Observer:
         player = np.asarray(obs["player"], dtype=np.float64).reshape(-1)
         n = len(player)
         np.log1p(np.maximum(player, 0.0), out=out[:n], casting="unsafe")
-        out[n] = _loop(obs) / GAME_LOOPS
+        out[n] = game_loop(obs) / GAME_LOOPS
         table = np.zeros(len(actions.FUNCTIONS), dtype=bool)
         table[np.asarray(obs["available_actions"])] = True
         out[n + 1:n + 1 + len(PAPER_FUNCTIONS)] = table[_paper_ids()]
@@ -262,7 +262,8 @@ class MacroClock:
         return (np.log1p(since) / np.log1p(GAME_LOOPS)).astype(np.float32)
 
 
-def _loop(obs: Mapping[str, Any]) -> int:
+def game_loop(obs: Mapping[str, Any]) -> int:
+    """The game loop of a pysc2 observation (its ``game_loop`` array's one value)."""
     return int(np.asarray(obs["game_loop"]).reshape(-1)[0])
 
 

@@ -178,8 +178,6 @@ class RLConfig:
     max_grad_norm: float = 0.5
     """Norm the gradient of PPO's whole loss (policy, entropy, value) is clipped to (SB3's
     default)."""
-    # With the game's reward the value's part of that one norm is 10–1,000× the policy's
-    # (benchmarks/ppo_gradients.py; BENCHMARKS.md, "The value loss's share of the gradient").
     share_features: bool = True
     """One feature network for the policy and the value function (SB3's default); off: one
     each (macro space)."""
@@ -262,10 +260,7 @@ def check_values(cfg: RLConfig) -> None:
             raise Sc2DataError(f"--{name.replace('_', '-')} must be at least 1")
     if cfg.episode_steps is not None and cfg.episode_steps < 1:
         raise Sc2DataError("--episode-steps must be at least 1")
-    if not (math.isfinite(cfg.reward_scale) and cfg.reward_scale > 0):
-        raise Sc2DataError(f"--reward-scale must be a positive finite number, got "
-                           f"{cfg.reward_scale}")
-    for name in ("vf_coef", "max_grad_norm"):
+    for name in ("reward_scale", "vf_coef", "max_grad_norm"):
         if not (math.isfinite(getattr(cfg, name)) and getattr(cfg, name) > 0):
             raise Sc2DataError(f"--{name.replace('_', '-')} must be a positive finite number, "
                                f"got {getattr(cfg, name)}")

@@ -14,6 +14,8 @@ Income is binned the same way on both sides: a sample is the collection rate at 
 worker count has not changed for the 240 loops it covers; one base, before any gas, MULE or second
 town hall. Real samples fall every 160 loops; the sim's after every agent step (8 loops), over
 several seeds, since one opening gives few windows of 240 loops between SCVs 272 loops apart.
+Like for like, income per SCV on the line also takes the SCVs constructing out of the worker
+count (Terrans: a replay shows each structure's start and finish; scouts it does not show).
 ``REAL_MEDIANS`` are the medians measured the same way on 32 LotV 1v1 replays (64 player-games,
 releases 2.5.5 to 5.0): the figures the test holds the simulator to, within ±5 %.
 
@@ -72,6 +74,7 @@ _F = actions.FUNCTIONS
 _P = features.Player
 _WORKER_NAMES = {"SCV", "Drone", "Probe"}
 _ONE_BASE_ENDS = ("Refinery", "Extractor", "Assimilator", "CommandCenter", "Hatchery", "Nexus")
+_ADD_ONS = ("Reactor", "TechLab")
 _BUILD_NAMES = {"SupplyDepot": "depot build", "Barracks": "barracks build",
                 "CommandCenter": "command center build"}
 
@@ -86,9 +89,15 @@ class Figures:
     """(minerals, workers, food_used, food_made) at the start of each game."""
     supply_checks: list[bool] = field(default_factory=list)
     """Per stats sample: food_made == 15 × town halls + 8 × finished depots (Terrans)."""
+    line: dict[int, list[float]] = field(default_factory=lambda: collections.defaultdict(list))
+    """Income per SCV on the mineral line, by worker count, for each income sample (Terrans):
+    the rate over the workers less the SCVs constructing, averaged over the window."""
 
     def income_median(self, n: int) -> float | None:
         return statistics.median(self.income[n]) if self.income.get(n) else None
+
+    def line_median(self, n: int) -> float | None:
+        return statistics.median(self.line[n]) if self.line.get(n) else None
 
     def timing_median(self, key: str) -> float | None:
         return statistics.median(self.timings[key]) if self.timings.get(key) else None
@@ -130,6 +139,8 @@ def _read_replay(replay: Any, out: Figures) -> None:
     barracks: dict[int, list[int]] = collections.defaultdict(list)
     changed: dict[int, int] = {}
     done_at: dict[int, int] = {}
+    constructing: dict[int, list[tuple[int, int]]] = collections.defaultdict(list)
+    """Per player, (start, end) of each structure an SCV built: from init to done or death."""
 
     def end_one_base(pid: int, loop: int) -> None:
         one_base_until[pid] = min(one_base_until.get(pid, NEVER), loop)
@@ -166,6 +177,10 @@ def _read_replay(replay: Any, out: Figures) -> None:
             changed[e.unit_id] = e.frame
         elif isinstance(e, UnitDiedEvent):
             died_at[e.unit_id] = e.frame
+
+    for uid, (pid, begun, name) in started.items():
+        if not name.endswith(_ADD_ONS):  # add-ons are built by their building, not an SCV
+            constructing[pid].append((begun, min(done_at.get(uid, NEVER), died_at.get(uid, NEVER))))
 
     commands: dict[tuple[int, str], list[int]] = collections.defaultdict(list)
     orbital: dict[int, int] = {}
@@ -213,6 +228,8 @@ def _read_replay(replay: Any, out: Figures) -> None:
                 or any(loop - WINDOW < b <= loop for b in worker_births[pid])):
             continue
         out.income[n].append(e.minerals_collection_rate)
+        if races.get(pid) == "Terran":
+            out.line[n].append(_per_line(e.minerals_collection_rate, n, constructing[pid], loop))
 
 
 def _production(commands: Sequence[int], births: Sequence[int], until: int, unit: str,
@@ -231,6 +248,16 @@ def _production(commands: Sequence[int], births: Sequence[int], until: int, unit
             out.timings[f"{unit} from idle"].append(b - c)
         else:
             out.timings[f"{unit} back to back"].append(b - births[i - 1])
+
+
+def _per_line(rate: int, workers: int, constructing: Sequence[tuple[int, int]],
+              loop: int) -> float:
+    """Income per SCV on the mineral line over the window ending at ``loop``: ``rate`` over the
+    workers less the mean number of SCVs constructing (one a structure under construction,
+    sampled every 8 loops of the window). Scouts and builders still walking are not seen."""
+    points = range(loop - WINDOW, loop, 8)
+    building = sum(a <= t < b for t in points for a, b in constructing) / len(points)
+    return rate / (workers - building)
 
 
 # ------------------------------------------------------------------ the sim side
@@ -295,6 +322,7 @@ def simulate(seeds: Iterable[int], agent: str = "opening", loops: int = 8000) ->
         queued: dict[int, list[int]] = collections.defaultdict(list)
         born: dict[int, list[int]] = collections.defaultdict(list)
         placed: dict[int, tuple[int, int]] = {}
+        constructing: list[tuple[int, int]] = []
         for ts in play(env, player):
             obs = ts.observation
             loop, n = int(obs.game_loop[0]), int(obs.player.food_workers)
@@ -308,6 +336,7 @@ def simulate(seeds: Iterable[int], agent: str = "opening", loops: int = 8000) ->
                     placed[e.tag] = (e.unit_type, e.loop)
                 elif e.kind == "completed" and e.tag in placed:
                     utype, begun = placed.pop(e.tag)
+                    constructing.append((begun, e.loop))
                     name = "depot build" if utype == md.DEPOT else "barracks build"
                     out.timings[name].append(e.loop - begun)
                 elif e.kind == "completed" and e.unit_type in (md.SCV, md.MARINE):
@@ -321,7 +350,10 @@ def simulate(seeds: Iterable[int], agent: str = "opening", loops: int = 8000) ->
                 counts.popleft()
             if loop >= FIRST_WINDOW + WINDOW and counts[0][0] <= loop - WINDOW and all(
                     m == n for _, m in counts):
-                out.income[n].append(int(obs.score_cumulative.collection_rate_minerals))
+                rate = int(obs.score_cumulative.collection_rate_minerals)
+                out.income[n].append(rate)
+                now = constructing + [(begun, NEVER) for _, begun in placed.values()]
+                out.line[n].append(_per_line(rate, n, now, loop))
         rax = [t for t in queued if t != g.cc.tag]
         _production(queued.get(g.cc.tag, []), born[md.SCV], NEVER, "SCV", out)
         if len(rax) == 1:  # marines matched to their one barracks
@@ -345,6 +377,14 @@ def table(real: Figures, sims: dict[str, Figures]) -> str:
         lines.append(f"| {n} | {REAL_MEDIANS[n]} | "
                      f"{_fmt(real.income_median(n), len(real.income.get(n, [])))} | "
                      + " | ".join(cells) + " |")
+    lines += ["", "| workers | per SCV on the line, these replays | " + " | ".join(
+        f"sim, {k}" for k in names) + " |", "|" + " --- |" * (2 + len(names))]
+    for n in WORKERS:
+        ref = real.line_median(n)
+        cells = [f"{_fmt(f.line_median(n), len(f.line.get(n, [])), 1)} "
+                 f"{_pct(f.line_median(n), ref) if ref else ''}" for f in sims.values()]
+        lines.append(f"| {n} | {_fmt(ref, len(real.line.get(n, [])), 1)} | "
+                     + " | ".join(cells) + " |")
     lines += ["", "| loops | real (32 replays) | these replays | " + " | ".join(
         f"sim, {k}" for k in names) + " |", "|" + " --- |" * (3 + len(names))]
     for key, want in REAL_TIMINGS.items():
@@ -361,8 +401,8 @@ def table(real: Figures, sims: dict[str, Figures]) -> str:
     return "\n".join(lines)
 
 
-def _fmt(x: float | None, n: int) -> str:
-    return "–" if x is None else f"{x:.0f} (n={n})"
+def _fmt(x: float | None, n: int, digits: int = 0) -> str:
+    return "–" if x is None else f"{x:.{digits}f} (n={n})"
 
 
 def _pct(x: float | None, ref: float) -> str:

@@ -36,6 +36,7 @@ from sc2data.game.env import make_env
 from sc2data.game.screen import ScreenView
 from sc2data.rl.envs import BuildMarinesGym
 from sc2data.rl.evaluate import UniformPolicy, eval_seeds, game_seed
+from sc2data.rl.obs import game_loop
 
 _P = features.Player
 AGENTS = ("uniform-macro", "reduced-random", "macro-rules", "scripted")
@@ -85,7 +86,7 @@ def episode(agent: str, seed: int, sites: str = "random") -> dict[str, Any]:
         cap_max = max(cap_max, int(player[_P.food_cap]))
         if ceiling is None and int(player[_P.food_used]) >= int(player[_P.food_cap]):
             if not ScreenView(ts).placements(2).any():
-                ceiling = int(np.asarray(obs["game_loop"]).reshape(-1)[0])
+                ceiling = game_loop(obs)
     obs, player = ts.observation, ts.observation["player"]
     t = units.Terran
     return {"marines": int(obs["score_cumulative"][0]), "food_cap": int(player[_P.food_cap]),

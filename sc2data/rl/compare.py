@@ -10,7 +10,8 @@ and argmax play apart. Per group, over its runs:
 * the **IQM** (interquartile mean: the mean of the middle 50 % of runs, ``scipy``'s
   ``trim_mean(·, 0.25)``, which trims ``⌊n/4⌋`` runs from each end) of the final scores, with a
   95 % **stratified bootstrap** confidence interval (percentile method; one task, so the
-  bootstrap resamples runs);
+  bootstrap resamples runs; each group's draws seeded by its own scores, so the same runs get
+  the same interval in every comparison);
 * the **probability of improvement** of one group over another, P(X > Y): the chance that a run
   of X scores above a run of Y, ties counting one half (the Mann–Whitney U over
   ``n_x · n_y``), with its bootstrap CI (runs of each group resampled independently);
@@ -92,18 +93,40 @@ def improvement(x: np.ndarray, y: np.ndarray) -> float:
 
 def _bootstrap(score_dict: dict[str, Any], func: Callable[..., np.ndarray], reps: int,
                seed: int) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
-    """``rly.get_interval_estimates`` seeded: rliable draws from numpy's global generator, so it
-    is seeded here and restored after."""
+    """``rly.get_interval_estimates`` (percentile intervals of rliable's stratified bootstrap),
+    each entry drawn from a stream of its own, seeded by ``seed`` and the entry's scores
+    (:func:`stream_seed`): the same runs get the same interval in every comparison, whatever
+    other groups stand beside them (one stream for all made a group's interval depend on the
+    groups drawn before it). rliable draws from numpy's global generator whatever generator it
+    is handed, so that is seeded per entry here and restored after. An entry is a table, or a
+    tuple of tables resampled independently."""
     from rliable import library as rly
 
+    point: dict[str, np.ndarray] = {}
+    interval: dict[str, np.ndarray] = {}
     saved = np.random.get_state()
-    np.random.seed(seed)
     try:
-        found: tuple[dict[str, np.ndarray], dict[str, np.ndarray]] = rly.get_interval_estimates(
-            score_dict, func, reps=reps, confidence_interval_size=CONFIDENCE)
-        return found
+        for key, scores in score_dict.items():
+            tables = scores if isinstance(scores, tuple) else (scores,)
+            np.random.seed(stream_seed(seed, *tables))
+            p, i = rly.get_interval_estimates({key: scores}, func, reps=reps,
+                                              confidence_interval_size=CONFIDENCE)
+            point[key], interval[key] = p[key], i[key]
     finally:
         np.random.set_state(saved)
+    return point, interval
+
+
+def stream_seed(seed: int, *tables: np.ndarray) -> int:
+    """A 32-bit seed from ``seed`` and the scores' values and shapes (crc32), so that a
+    bootstrap's draws follow from what it resamples, not from its place in a comparison."""
+    import zlib
+
+    crc = zlib.crc32(int(seed).to_bytes(8, "little", signed=True))
+    for t in tables:
+        a = np.ascontiguousarray(t, dtype=np.float64)
+        crc = zlib.crc32(repr(a.shape).encode() + a.tobytes(), crc)
+    return crc
 
 
 def iqm_intervals(tables: dict[str, np.ndarray], reps: int = 2000, seed: int = 0

@@ -60,6 +60,22 @@ def test_bootstrap_intervals_hold_the_point_and_are_seeded() -> None:
     assert (p, plo, phi) == (0.0, 0.0, 0.0)
 
 
+def test_a_groups_interval_does_not_depend_on_the_groups_beside_it() -> None:
+    # Each group is drawn from a stream of its own, seeded by the scores: the same runs give the
+    # same interval alone, after another group, or named otherwise (one shared stream did not).
+    runs = np.array([[19.4], [22.4], [25.3], [24.0], [43.4], [17.2], [7.7], [12.6], [12.5], [18.0]])
+    other = runs * 1.1 + 3.0
+    alone = iqm_intervals({"sparse": runs}, reps=400, seed=0)["sparse"]
+    beside = iqm_intervals({"narration": other, "sparse": runs}, reps=400, seed=0)
+    assert beside["sparse"] == alone
+    assert iqm_intervals({"renamed": runs}, reps=400, seed=0)["renamed"] == alone
+    assert beside["narration"] != alone  # other scores, another stream
+    assert iqm_intervals({"sparse": runs}, reps=400, seed=1)["sparse"] != alone
+    pair = improvement_intervals({"n > s": (other, runs)}, 300)["n > s"]
+    assert improvement_intervals({"s > s": (runs, runs), "n > s": (other, runs)},
+                                 300)["n > s"] == pair
+
+
 def test_profiles_count_the_runs_above_each_threshold() -> None:
     tables = {"a": np.array([[1.0], [5.0], [9.0]]), "flat": np.full((2, 1), 3.0)}
     taus = np.array([0.0, 1.0, 4.0, 9.0])

@@ -51,6 +51,8 @@ class Demonstrations:
     returns: np.ndarray
     """The game's return from each decision on, γ per pysc2 step (``--smdp``) or per decision."""
     marines: list[int]
+    episodes: np.ndarray
+    """Which episode (0-based) each decision is of."""
 
 
 def demonstrate(cfg: RLConfig, episodes: int, model: Any = None) -> Demonstrations:
@@ -60,7 +62,7 @@ def demonstrate(cfg: RLConfig, episodes: int, model: Any = None) -> Demonstratio
                           game_loops=game_loops(cfg), merge_waits=cfg.merge_waits,
                           sites=cfg.macro_sites)
     agent = MacroRulesAgent(0, sites=cfg.macro_sites)
-    obs, masks, chosen, returns, marines = [], [], [], [], []
+    obs, masks, chosen, returns, marines, episode = [], [], [], [], [], []
     try:
         for e in range(episodes):
             o, info = env.reset(seed=DEMO_SEED + e)
@@ -77,6 +79,7 @@ def demonstrate(cfg: RLConfig, episodes: int, model: Any = None) -> Demonstratio
                 obs.append(o)
                 masks.append(env.action_masks())
                 chosen.append(action)
+                episode.append(e)
                 o, reward, done, _, info = env.step(action)
                 rewards.append(float(reward))
                 steps.append(int(info["env_steps"]) if cfg.smdp else 1)
@@ -89,7 +92,8 @@ def demonstrate(cfg: RLConfig, episodes: int, model: Any = None) -> Demonstratio
     finally:
         env.close()
     return Demonstrations({k: np.stack([x[k] for x in obs]) for k in obs[0]}, np.stack(masks),
-                          np.asarray(chosen, np.int64), np.asarray(returns, np.float32), marines)
+                          np.asarray(chosen, np.int64), np.asarray(returns, np.float32), marines,
+                          np.asarray(episode, np.int64))
 
 
 def norm(loss: torch.Tensor, params: list[torch.nn.Parameter]) -> float:

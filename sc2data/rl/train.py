@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from sc2data.ground.errors import MissingDependencyError, Sc2DataError
-from sc2data.ground.files import FolderLock, check_out, writing
+from sc2data.ground.files import FolderLock, check_out, sha256_file, writing
 from sc2data.ground.formats import Shape
 from sc2data.ground.progress import bar
 from sc2data.ground.resume import differences, read_record, refusal
@@ -204,6 +204,11 @@ class RLConfig:
     """Macro space, compact observation: the policy also sees the game time since each macro
     last acted (as pysc2's last_actions; else a builder on its way shows nowhere)."""
     # sc2data.rl.obs.MacroClock.
+    init_policy: str | None = None
+    """Start from this trained run's policy (its model.zip: the same action space, observation
+    and network) instead of a fresh one, e.g. a clone of the macro-rules agent."""
+    # benchmarks/clone_rules.py writes such a run. The starting checkpoint is recorded by
+    # content when the run begins (inputs.init_policy_sha256); a resume reads its own.
     tensorboard: bool = False
     """Also write SB3's log as TensorBoard events (RUN/logs/<session>/; needs tensorboard)."""
     progress: bool | None = None
@@ -216,7 +221,7 @@ class RLConfig:
         "ent_coef_final": None, "normalize_advantage": True, "target_kl": None, "smdp": False,
         "shaping": "event", "env_groups": 1, "merge_waits": False, "macro_sites": "random",
         "history": False, "share_features": True, "reward_scale": 1.0,
-        "vf_coef": 0.5, "max_grad_norm": 0.5}
+        "vf_coef": 0.5, "max_grad_norm": 0.5, "init_policy": None}
     """Settings added since runs were first written, as those runs had them: a run folder whose
     ``config.json`` lacks one was trained so."""
 
@@ -505,8 +510,13 @@ def _forget(run: Path, whole: bool) -> None:
 
 def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path:
     runs.recover(run)
-    identity = {**cfg.identity(), "inputs": runs.input_digests(narration, cfg.mem)}
+    inputs = runs.input_digests(narration, cfg.mem)
+    if cfg.init_policy is not None:
+        inputs.update(_init_digest(cfg, run))
+    identity = {**cfg.identity(), "inputs": inputs}
     state = _resume_state(cfg, run, identity)
+    if cfg.init_policy is not None and not state["timesteps"]:
+        check_init(cfg)
     if state["timesteps"] >= cfg.steps:
         print(f"{run} is already trained for {state['timesteps']} steps (--steps {cfg.steps})")
         return run
@@ -530,6 +540,8 @@ def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path
             model.groups = cfg.env_groups
         else:
             model = new_model(cfg, vec, seed, device)
+            if cfg.init_policy is not None:
+                start_from(model, Path(cfg.init_policy), vec, device)
         model.set_logger(configure(str(run / runs.LOGS / str(state["resumes"])), formats))
         with bar(cfg.steps, desc="rl train", unit="step", show=cfg.progress) as progress:
             progress.update(state["timesteps"])
@@ -540,6 +552,54 @@ def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path
     finally:
         vec.close()
     return run
+
+
+INIT_MATCH: tuple[str, ...] = ("action_space", "obs", "obs_size", "minimap", "history",
+                               "layers", "share_features")
+"""Settings a starting policy (``--init-policy``) must share with the run: they shape its
+inputs, outputs and network."""
+
+
+def check_init(cfg: RLConfig) -> None:
+    """One line unless ``cfg.init_policy`` is a trained run (checked by content) whose policy
+    fits this run: the same :data:`INIT_MATCH` settings and policy."""
+    assert cfg.init_policy is not None
+    src = Path(cfg.init_policy)
+    init = load_config(src)
+    odd = [(k.replace("_", "-"), getattr(init, k), getattr(cfg, k)) for k in INIT_MATCH
+           if getattr(init, k) != getattr(cfg, k)]
+    if resolved_policy(init) != resolved_policy(cfg):
+        odd.append(("policy", resolved_policy(init), resolved_policy(cfg)))
+    if odd:
+        name, theirs, ours = odd[0]
+        raise Sc2DataError(f"--init-policy {src} was trained with --{name} {theirs} and this "
+                           f"run has {ours}; a starting policy needs the run's action space, "
+                           f"observation and network")
+
+
+def start_from(model: Any, src: Path, vec: Any, device: Any) -> None:
+    """Give the new ``model`` the policy (and value function) of the trained run ``src``."""
+    init = runs.load_model(src, vec, device)
+    try:
+        model.policy.load_state_dict(init.policy.state_dict())
+    except RuntimeError as e:
+        first = (str(e).strip().splitlines() or ["another network"])[0]
+        raise Sc2DataError(f"--init-policy {src}: its network does not fit this run's "
+                           f"({first})") from None
+
+
+def _init_digest(cfg: RLConfig, run: Path) -> dict[str, str]:
+    """The starting policy's checkpoint by content, as recorded when the run began (a resume
+    reads it from its own ``config.json``, whatever became of that file since)."""
+    if (run / runs.CONFIG).is_file():
+        old = read_config(run).get("inputs") or {}
+        if "init_policy_sha256" in old:
+            return {"init_policy_sha256": old["init_policy_sha256"]}
+    model = Path(str(cfg.init_policy)) / runs.MODEL
+    if not model.is_file():
+        raise Sc2DataError(f"--init-policy {cfg.init_policy} is not a trained sc2data rl run "
+                           f"(no model.zip); pass the --out of sc2data rl train")
+    return {"init_policy_sha256": sha256_file(model)}
 
 
 def _resume_state(cfg: RLConfig, run: Path, identity: dict[str, Any]) -> dict[str, Any]:

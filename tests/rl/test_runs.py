@@ -235,3 +235,57 @@ def test_the_learning_rate_reaches_ppo(tmp_path: Path, trained: Path) -> None:
     assert _cli(["rl", "train", "--out", run, *TINY, "--learning-rate", "0.001"]) == 0
     assert set(_logged(run, "train/learning_rate")) == {0.001}
     assert set(_logged(trained, "train/learning_rate")) == {0.0003}
+
+
+def test_a_run_can_start_from_another_runs_policy(
+        trained: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """--init-policy: the new run's policy before its first update is the other run's, weight
+    for weight (training skipped here so that the checkpoint holds the starting policy); a
+    fresh run of the same seed is not; the start is recorded by path and by content."""
+    import torch
+
+    from sc2data.rl.pipeline import PipelinedPPO
+
+    monkeypatch.setattr(PipelinedPPO, "learn", lambda self, **kwargs: self)
+    start, fresh = tmp_path / "start", tmp_path / "fresh"
+    for run, extra in ((start, ["--init-policy", str(trained)]), (fresh, [])):
+        code, _, err = run_cli(["rl", "train", "--out", run, *TINY, "--seed", "3", *extra],
+                               capsys)
+        assert code == 0, err
+
+    def weights(run: Path) -> dict[str, torch.Tensor]:
+        return dict(PipelinedPPO.load(run / runs.MODEL).policy.state_dict())
+
+    source, started, new = weights(trained), weights(start), weights(fresh)
+    assert source.keys() == started.keys()
+    assert all(torch.equal(source[k], started[k]) for k in source)
+    assert not all(torch.equal(source[k], new[k]) for k in source)
+    config = json.loads((start / runs.CONFIG).read_text())
+    assert config["init_policy"] == str(trained)
+    assert config["inputs"]["init_policy_sha256"] == runs.sha256_file(trained / runs.MODEL)
+    assert json.loads((fresh / runs.CONFIG).read_text())["init_policy"] is None
+
+
+def test_a_started_run_resumes_without_its_start_and_a_bad_start_is_one_line(
+        trained: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    src = _copy(trained, tmp_path / "src")
+    run = tmp_path / "run"
+    code, _, err = run_cli(["rl", "train", "--out", run, *TINY, "--init-policy", src], capsys)
+    assert code == 0, err
+    shutil.rmtree(src)  # a resume loads its own checkpoint and keeps the recorded digest
+    code, out, err = run_cli(["rl", "train", "--out", run, *TINY, "--steps", "96",
+                              "--init-policy", src], capsys)
+    assert code == 0, err
+    assert out.startswith(f"trained {run}: 96 decisions")
+    for extra, needles in (
+            (["--init-policy", tmp_path / "nothing"], ("--init-policy", "not a trained")),
+            (["--init-policy", trained, "--action-space", "paper"],
+             ("--action-space macro", "this run has paper")),
+            (["--init-policy", trained, "--no-share-features"],
+             ("--share-features True", "this run has False")),
+            (["--init-policy", trained, "--history"], ("--history False",))):
+        out_dir = tmp_path / "bad"
+        code, _, err = run_cli(["rl", "train", "--out", out_dir, *TINY, *extra], capsys)
+        assert_one_line_error(code, err, *needles)
+        assert not out_dir.exists()  # nothing half-written

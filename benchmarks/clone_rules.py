@@ -1,0 +1,175 @@
+"""Can a run's policy network, on the run's observation, play the macro-rules agent's game?
+Behaviour cloning of that agent in the macro space, as a diagnostic of the RL experiment.
+
+The macro-space learners end as a fixed ranking of the six macros that only the action mask
+moves (BENCHMARKS.md, "Far sites, 10 seeds"), so argmax play repeats one macro. Either the
+network cannot tell the states apart that the rules tell apart (what it sees, or how), or PPO's
+signal does not teach it to. This script separates the two: it plays ``--episodes`` of the
+macro-rules agent on the run's env (:func:`ppo_gradients.demonstrate`: the agent asked at each
+decision which macro it would start, the env playing it; seeds 500,000,000 on, which training
+and evaluation never use), fits a fresh policy of the run's settings to the agent's choices by
+maximum likelihood under the action masks (Adam, minibatches of 256; the value head untouched),
+and reports, per macro the agent chose, how often the policy's most likely macro is the same on
+``--held-out`` episodes it did not see (and their mean, the balanced accuracy: the agent waits
+at most decisions). It then writes the cloned policy as a run folder (the run's
+``config.json``, the policy committed as ``rl train`` commits one, no training episodes) so that
+``sc2data rl evaluate OUT`` plays it on the evaluation episodes, sampled and argmax, like any
+run, and
+``benchmarks/policy_trace.py OUT`` traces it, and ``sc2data rl train --init-policy OUT`` starts
+PPO from it; ``OUT/clone.json`` records what was fitted.
+
+    python benchmarks/clone_rules.py RUN --out OUT [--episodes 16] [--held-out 2] [--epochs 30]
+        [--history] [--balanced]
+
+``--history`` gives the policy the time since each macro last acted (``rl train --history``),
+which the rules' own timers use and the screen does not show.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from ppo_gradients import Demonstrations, demonstrate
+
+from sc2data.ground.errors import Sc2DataError
+from sc2data.rl import runs
+from sc2data.rl.obs import MACROS
+from sc2data.rl.train import load_config, make_vec_env, new_model
+
+
+def split(demos: Demonstrations, held_out: int) -> tuple[np.ndarray, np.ndarray]:
+    """Decision indices of the first episodes and of the last ``held_out``."""
+    test = demos.episodes >= len(demos.marines) - held_out
+    return np.flatnonzero(~test), np.flatnonzero(test)
+
+
+def _batch(demos: Demonstrations, idx: np.ndarray) -> dict[str, torch.Tensor]:
+    return {k: torch.as_tensor(v[idx]).float() for k, v in demos.obs.items()}
+
+
+def predictions(policy: Any, demos: Demonstrations, idx: np.ndarray) -> np.ndarray:
+    """The policy's most likely allowed macro at each of the decisions ``idx``."""
+    out = []
+    with torch.no_grad():
+        for part in np.array_split(idx, max(1, len(idx) // 512)):
+            dist = policy.get_distribution(_batch(demos, part), action_masks=demos.masks[part])
+            out.append(dist.distribution.probs.argmax(-1).numpy())
+    return np.concatenate(out) if out else np.zeros(0, np.int64)
+
+
+def recalls(policy: Any, demos: Demonstrations, idx: np.ndarray) -> dict[str, float]:
+    """Per macro the agent chose at ``idx``, the share of those decisions where the policy's
+    most likely macro is the same; ``balanced``: their mean (the agent waits at most decisions,
+    so a policy that always waits is right at most of them and 1/6 balanced)."""
+    best, truth = predictions(policy, demos, idx), demos.actions[idx]
+    out = {m: float(np.mean(best[truth == i] == i)) for i, m in enumerate(MACROS)
+           if (truth == i).any()}
+    out["balanced"] = float(np.mean(list(out.values()))) if out else float("nan")
+    return out
+
+
+def fit(policy: Any, demos: Demonstrations, train: np.ndarray, test: np.ndarray, epochs: int,
+        lr: float, seed: int, balanced: bool = False) -> list[dict[str, float]]:
+    """Maximum likelihood of the agent's macros under the masks; per epoch the mean negative
+    log-likelihood and the balanced accuracy (:func:`recalls`) on both parts. ``balanced``:
+    each decision weighted by the inverse of its macro's share of the training decisions, so
+    that every macro weighs as much in the loss as the waits do."""
+    params = [p for n, p in policy.named_parameters() if "value_net" not in n]
+    opt = torch.optim.Adam(params, lr=lr)
+    rng = np.random.default_rng(seed)
+    counts = np.bincount(demos.actions[train], minlength=len(MACROS)).astype(float)
+    weight = np.where(counts > 0, len(train) / (len(MACROS) * np.maximum(counts, 1)), 0.0) \
+        if balanced else np.ones(len(MACROS))
+    log = []
+    for epoch in range(epochs):
+        losses = []
+        for part in np.array_split(rng.permutation(train), max(1, len(train) // 256)):
+            _, log_prob, _ = policy.evaluate_actions(
+                _batch(demos, part), torch.as_tensor(demos.actions[part]),
+                action_masks=demos.masks[part])
+            w = torch.as_tensor(weight[demos.actions[part]], dtype=log_prob.dtype)
+            loss = -(w * log_prob).sum() / w.sum()
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            losses.append(float(loss.detach()))
+        row = {"epoch": epoch + 1, "nll": float(np.mean(losses)),
+               "train_balanced": recalls(policy, demos, train)["balanced"],
+               "held_out_balanced": recalls(policy, demos, test)["balanced"]}
+        log.append(row)
+        print(f"epoch {row['epoch']:3d}  nll {row['nll']:.3f}  balanced accuracy train "
+              f"{row['train_balanced']:.3f}  held out {row['held_out_balanced']:.3f}", flush=True)
+    return log
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("run", type=Path, help="a macro-space run whose settings the clone takes")
+    ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--episodes", type=int, default=16)
+    ap.add_argument("--held-out", type=int, default=2)
+    ap.add_argument("--epochs", type=int, default=30)
+    ap.add_argument("--lr", type=float, default=3e-4)
+    ap.add_argument("--balanced", action="store_true",
+                    help="weight each macro by the inverse of its share of the decisions")
+    ap.add_argument("--history", action=argparse.BooleanOptionalAction, default=None,
+                    help="the time since each macro last acted (default: as the run)")
+    args = ap.parse_args()
+    if args.episodes <= args.held_out or args.held_out < 1 or args.epochs < 1:
+        raise SystemExit("clone_rules.py: --held-out must be at least 1 and below --episodes, "
+                         "--epochs at least 1")
+    if args.out.exists():
+        raise SystemExit(f"clone_rules.py: {args.out} exists; pick another --out")
+    try:
+        cfg = load_config(args.run)
+    except Sc2DataError as e:
+        raise SystemExit(f"clone_rules.py: {e}") from None
+    if cfg.action_space != "macro":
+        raise SystemExit("clone_rules.py: the macro-rules agent plays the macro space; "
+                         f"{args.run} is a {cfg.action_space}-space run")
+    history = cfg.history if args.history is None else args.history
+    cfg = dataclasses.replace(cfg, envs=1, processes=0, reward="sparse", shaping="event",
+                              mem=None, narration=None, history=history)
+    torch.set_num_threads(1)
+    t0 = time.perf_counter()
+    demos = demonstrate(cfg, args.episodes)
+    train, test = split(demos, args.held_out)
+    shares = {m: round(float(np.mean(demos.actions == i)), 4) for i, m in enumerate(MACROS)}
+    print(f"macro-rules: {len(demos.actions)} decisions over {args.episodes} episodes, "
+          f"{np.mean(demos.marines):.1f} marines an episode ({time.perf_counter() - t0:.0f} s); "
+          f"decisions {shares}", flush=True)
+    vec = make_vec_env(cfg)
+    try:
+        model = new_model(cfg, vec, cfg.seed)
+        before = recalls(model.policy, demos, test)
+        print(f"the untrained policy, held out: {before}", flush=True)
+        log = fit(model.policy, demos, train, test, args.epochs, args.lr, cfg.seed,
+                  args.balanced)
+        after = recalls(model.policy, demos, test)
+        print(f"the cloned policy, held out: {after}", flush=True)
+        args.out.mkdir(parents=True)
+        runs.write_record(args.out / runs.CONFIG, cfg.identity())
+        runs.commit(args.out, model, [], {"config": cfg.identity(), "episodes": []},
+                    {"timesteps": 0, "env_steps": 0, "episodes": 0, "resumes": 0})
+    finally:
+        vec.close()
+    record = {"like": str(args.run), "episodes": args.episodes, "held_out": args.held_out,
+              "decisions": int(len(demos.actions)), "rules_marines": demos.marines,
+              "rules_decisions": shares, "epochs": args.epochs, "lr": args.lr,
+              "balanced": args.balanced,
+              "history": history, "untrained_held_out": before, "cloned_held_out": after,
+              "log": log}
+    (args.out / "clone.json").write_text(json.dumps(record, indent=1) + "\n")
+    print(f"wrote {args.out} ({time.perf_counter() - t0:.0f} s); next: sc2data rl evaluate "
+          f"{args.out}")
+
+
+if __name__ == "__main__":
+    main()

@@ -30,6 +30,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import shutil
 import time
 from pathlib import Path
 from typing import Any
@@ -154,10 +155,6 @@ def main() -> None:
                   args.balanced)
         after = recalls(model.policy, demos, test)
         print(f"the cloned policy, held out: {after}", flush=True)
-        args.out.mkdir(parents=True)
-        runs.write_record(args.out / runs.CONFIG, cfg.identity())
-        runs.commit(args.out, model, [], {"config": cfg.identity(), "episodes": []},
-                    {"timesteps": 0, "env_steps": 0, "episodes": 0, "resumes": 0})
     finally:
         vec.close()
     record = {"like": str(args.run), "episodes": args.episodes, "held_out": args.held_out,
@@ -166,7 +163,16 @@ def main() -> None:
               "balanced": args.balanced,
               "history": history, "untrained_held_out": before, "cloned_held_out": after,
               "log": log}
-    (args.out / "clone.json").write_text(json.dumps(record, indent=1) + "\n")
+    # written beside OUT and renamed into place: an interrupted clone leaves no OUT that looks
+    # like a run
+    tmp = args.out.with_name(f".{args.out.name}.partial")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    runs.write_record(tmp / runs.CONFIG, cfg.identity())
+    runs.commit(tmp, model, [], {"config": cfg.identity(), "episodes": []},
+                {"timesteps": 0, "env_steps": 0, "episodes": 0, "resumes": 0})
+    (tmp / "clone.json").write_text(json.dumps(record, indent=1) + "\n")
+    tmp.rename(args.out)
     print(f"wrote {args.out} ({time.perf_counter() - t0:.0f} s); next: sc2data rl evaluate "
           f"{args.out}")
 

@@ -30,6 +30,20 @@ from stable_baselines3.common.utils import obs_as_tensor
 from sc2data.rl.vector import spans
 
 
+def masked_kl(p: Any, q: Any) -> th.Tensor:
+    """KL(p ‖ q) per sample between two masked categorical distributions of one action space
+    (sb3-contrib's; a multi-categorical sums over its heads). Actions the mask rules out have
+    probability 0 under both and add nothing."""
+    ps = getattr(p, "distributions", None) or [p.distribution]
+    qs = getattr(q, "distributions", None) or [q.distribution]
+    total = th.zeros(ps[0].probs.shape[0], device=ps[0].probs.device)
+    for a, b in zip(ps, qs):
+        allowed = a.probs > 0
+        terms = a.probs * (a.logits - b.logits)
+        total = total + th.where(allowed, terms, th.zeros_like(terms)).sum(-1)
+    return total
+
+
 class PipelinedPPO(MaskablePPO):
     """MaskablePPO that collects its rollouts a group of games at a time (module docstring) on
     an env with ``step_async_rows``/``step_wait_rows``
@@ -38,9 +52,35 @@ class PipelinedPPO(MaskablePPO):
 
     groups: int = 1
     """Groups of games (set after building or loading: it is not saved with the model)."""
+    teacher: Any = None
+    """A policy to stay near (``rl train --kickstart``; set after building or loading)."""
+    kickstart_coef: float = 1.0
+    """Weight of the KL to :attr:`teacher`."""
 
     def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), "groups"]
+        return [*super()._excluded_save_params(), "groups", "teacher", "kickstart_coef"]
+
+    def train(self) -> None:
+        """PPO's update, then with a :attr:`teacher` one pass over the rollout lowering
+        ``kickstart_coef`` × KL(teacher ‖ policy) on its states, under its masks."""
+        super().train()
+        if self.teacher is not None:
+            self._kickstart()
+
+    def _kickstart(self) -> None:
+        self.policy.set_training_mode(True)
+        kls = []
+        for data in self.rollout_buffer.get(self.batch_size):
+            with th.no_grad():
+                teacher = self.teacher.get_distribution(data.observations, data.action_masks)
+            student = self.policy.get_distribution(data.observations, data.action_masks)
+            kl = masked_kl(teacher, student).mean()
+            self.policy.optimizer.zero_grad()
+            (self.kickstart_coef * kl).backward()
+            th.nn.utils.clip_grad_norm_(self.policy.parameters(), self.max_grad_norm)
+            self.policy.optimizer.step()
+            kls.append(kl.item())
+        self.logger.record("train/kickstart_kl", float(np.mean(kls)))
 
     def collect_rollouts(self, env: Any, callback: BaseCallback, rollout_buffer: Any,
                          n_rollout_steps: int, use_masking: bool = True) -> bool:

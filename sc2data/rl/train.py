@@ -209,6 +209,17 @@ class RLConfig:
     and network) instead of a fresh one, e.g. a clone of the macro-rules agent."""
     # benchmarks/clone_rules.py writes such a run. The starting checkpoint is recorded by
     # content when the run begins (inputs.init_policy_sha256); a resume reads its own.
+    kickstart: str | None = None
+    """Keep the policy near this trained run's (a teacher of the same action space and
+    observation, e.g. a clone of the macro-rules agent): after each PPO update, one pass over
+    the rollout lowering --kickstart-coef × KL(teacher ‖ policy) on its states (the independent
+    policy)."""
+    # Kickstarting (Schmitt et al. 2018) as a phase of its own after PPO's epochs, as PPG's
+    # auxiliary phase (Cobbe et al. 2020): sc2data.rl.pipeline.PipelinedPPO.train. The
+    # teacher's checkpoint is recorded by content (inputs.kickstart_sha256): a resume needs the
+    # same file.
+    kickstart_coef: float = 1.0
+    """Weight of the kickstart KL (--kickstart)."""
     tensorboard: bool = False
     """Also write SB3's log as TensorBoard events (RUN/logs/<session>/; needs tensorboard)."""
     progress: bool | None = None
@@ -221,7 +232,8 @@ class RLConfig:
         "ent_coef_final": None, "normalize_advantage": True, "target_kl": None, "smdp": False,
         "shaping": "event", "env_groups": 1, "merge_waits": False, "macro_sites": "random",
         "history": False, "share_features": True, "reward_scale": 1.0,
-        "vf_coef": 0.5, "max_grad_norm": 0.5, "init_policy": None}
+        "vf_coef": 0.5, "max_grad_norm": 0.5, "init_policy": None, "kickstart": None,
+        "kickstart_coef": 1.0}
     """Settings added since runs were first written, as those runs had them: a run folder whose
     ``config.json`` lacks one was trained so."""
 
@@ -265,7 +277,7 @@ def check_values(cfg: RLConfig) -> None:
             raise Sc2DataError(f"--{name.replace('_', '-')} must be at least 1")
     if cfg.episode_steps is not None and cfg.episode_steps < 1:
         raise Sc2DataError("--episode-steps must be at least 1")
-    for name in ("reward_scale", "vf_coef", "max_grad_norm"):
+    for name in ("reward_scale", "vf_coef", "max_grad_norm", "kickstart_coef"):
         if not (math.isfinite(getattr(cfg, name)) and getattr(cfg, name) > 0):
             raise Sc2DataError(f"--{name.replace('_', '-')} must be a positive finite number, "
                                f"got {getattr(cfg, name)}")
@@ -318,6 +330,9 @@ def check_values(cfg: RLConfig) -> None:
                            "policy chooses its sites)")
     if cfg.shaping != "event" and cfg.reward not in ("rules", "narration"):
         raise Sc2DataError(f"--shaping {cfg.shaping} goes with --reward rules or narration")
+    if cfg.kickstart is not None and resolved_policy(cfg) != "independent":
+        raise Sc2DataError("--kickstart goes with the independent policy (the macro space, or "
+                           "--policy independent in the paper space)")
 
 
 DEVICES: tuple[str, ...] = ("auto", "cpu", "cuda")
@@ -513,10 +528,14 @@ def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path
     inputs = runs.input_digests(narration, cfg.mem)
     if cfg.init_policy is not None:
         inputs.update(_init_digest(cfg, run))
+    if cfg.kickstart is not None:
+        inputs["kickstart_sha256"] = sha256_file(_trained_model(cfg.kickstart, "--kickstart"))
     identity = {**cfg.identity(), "inputs": inputs}
     state = _resume_state(cfg, run, identity)
     if cfg.init_policy is not None and not state["timesteps"]:
-        check_init(cfg)
+        check_init(cfg, cfg.init_policy, "--init-policy", INIT_MATCH)
+    if cfg.kickstart is not None:
+        check_init(cfg, cfg.kickstart, "--kickstart", TEACHER_MATCH)
     if state["timesteps"] >= cfg.steps:
         print(f"{run} is already trained for {state['timesteps']} steps (--steps {cfg.steps})")
         return run
@@ -542,6 +561,10 @@ def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path
             model = new_model(cfg, vec, seed, device)
             if cfg.init_policy is not None:
                 start_from(model, Path(cfg.init_policy), vec, device)
+        if cfg.kickstart is not None:
+            model.teacher = runs.load_model(Path(cfg.kickstart), vec, device).policy
+            model.teacher.set_training_mode(False)
+            model.kickstart_coef = cfg.kickstart_coef
         model.set_logger(configure(str(run / runs.LOGS / str(state["resumes"])), formats))
         with bar(cfg.steps, desc="rl train", unit="step", show=cfg.progress) as progress:
             progress.update(state["timesteps"])
@@ -558,23 +581,29 @@ INIT_MATCH: tuple[str, ...] = ("action_space", "obs", "obs_size", "minimap", "hi
                                "layers", "share_features")
 """Settings a starting policy (``--init-policy``) must share with the run: they shape its
 inputs, outputs and network."""
+TEACHER_MATCH: tuple[str, ...] = INIT_MATCH[:-1]
+"""Settings a teacher (``--kickstart``) must share with the run: its inputs and outputs (its
+network may be another)."""
 
 
-def check_init(cfg: RLConfig) -> None:
-    """One line unless ``cfg.init_policy`` is a trained run (checked by content) whose policy
-    fits this run: the same :data:`INIT_MATCH` settings and policy."""
-    assert cfg.init_policy is not None
-    src = Path(cfg.init_policy)
+def check_init(cfg: RLConfig, source: str, option: str, match: tuple[str, ...]) -> None:
+    """One line unless ``source`` is a trained run (checked by content) that fits this run:
+    the same ``match`` settings, and for a starting policy (``INIT_MATCH``) the same policy."""
+    src = Path(source)
     init = load_config(src)
-    odd = [(k.replace("_", "-"), getattr(init, k), getattr(cfg, k)) for k in INIT_MATCH
+    odd = [(k.replace("_", "-"), getattr(init, k), getattr(cfg, k)) for k in match
            if getattr(init, k) != getattr(cfg, k)]
-    if resolved_policy(init) != resolved_policy(cfg):
+    if match == INIT_MATCH and resolved_policy(init) != resolved_policy(cfg):
         odd.append(("policy", resolved_policy(init), resolved_policy(cfg)))
+    if resolved_policy(init) != "independent" and match == TEACHER_MATCH:
+        odd.append(("policy", resolved_policy(init), "independent"))
     if odd:
         name, theirs, ours = odd[0]
-        raise Sc2DataError(f"--init-policy {src} was trained with --{name} {theirs} and this "
-                           f"run has {ours}; a starting policy needs the run's action space, "
-                           f"observation and network")
+        need = ("a starting policy needs the run's action space, observation and network"
+                if match == INIT_MATCH else "a teacher needs the run's action space and "
+                "observation, and the independent policy")
+        raise Sc2DataError(f"{option} {src} was trained with --{name} {theirs} and this run "
+                           f"has {ours}; {need}")
 
 
 def start_from(model: Any, src: Path, vec: Any, device: Any) -> None:
@@ -595,11 +624,17 @@ def _init_digest(cfg: RLConfig, run: Path) -> dict[str, str]:
         old = read_config(run).get("inputs") or {}
         if "init_policy_sha256" in old:
             return {"init_policy_sha256": old["init_policy_sha256"]}
-    model = Path(str(cfg.init_policy)) / runs.MODEL
+    return {"init_policy_sha256": sha256_file(_trained_model(str(cfg.init_policy),
+                                                             "--init-policy"))}
+
+
+def _trained_model(source: str, option: str) -> Path:
+    """``source``'s checkpoint, or one line if it has none."""
+    model = Path(source) / runs.MODEL
     if not model.is_file():
-        raise Sc2DataError(f"--init-policy {cfg.init_policy} is not a trained sc2data rl run "
-                           f"(no model.zip); pass the --out of sc2data rl train")
-    return {"init_policy_sha256": sha256_file(model)}
+        raise Sc2DataError(f"{option} {source} is not a trained sc2data rl run (no model.zip); "
+                           f"pass the --out of sc2data rl train")
+    return model
 
 
 def _resume_state(cfg: RLConfig, run: Path, identity: dict[str, Any]) -> dict[str, Any]:

@@ -44,7 +44,7 @@ def fork(run: Path, out: Path, mem: Path) -> dict[str, Any]:
         from sc2data.rl.narration import load_narration
         from sc2data.rl.runs import input_digests
 
-        # the other inputs (a starting policy's digest) stay as the run recorded them
+        # the other inputs (a starting policy's, a teacher's digest) stay as the run recorded them
         config["inputs"] = {**config["inputs"],
                             **input_digests(load_narration(cfg.narration), str(mem))}
     tmp = out.with_name(f".{out.name}{PARTIAL}")

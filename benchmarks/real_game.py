@@ -416,22 +416,8 @@ def table(real: Figures, sims: dict[str, Figures]) -> str:
         lines.append(f"| {n} | {REAL_MEDIANS[n]} | "
                      f"{_fmt(real.income_median(n), len(real.income.get(n, [])))} | "
                      + " | ".join(cells) + " |")
-    lines += ["", "| workers | per SCV on the line, these replays | " + " | ".join(
-        f"sim, {k}" for k in names) + " |", "|" + " --- |" * (2 + len(names))]
-    for n in WORKERS:
-        ref = real.line_median(n)
-        cells = [f"{_fmt(f.line_median(n), len(f.line.get(n, [])), 1)} "
-                 f"{_pct(f.line_median(n), ref) if ref else ''}" for f in sims.values()]
-        lines.append(f"| {n} | {_fmt(ref, len(real.line.get(n, [])), 1)} | "
-                     + " | ".join(cells) + " |")
-    lines += ["", "| SCVs on the line (window mean) | per SCV, these replays | " + " | ".join(
-        f"sim, {k}" for k in names) + " |", "|" + " --- |" * (2 + len(names))]
-    for n in WORKERS:
-        ref = real.on_line_median(n)
-        cells = [f"{_fmt(f.on_line_median(n), len(f.on_line.get(n, [])), 1)} "
-                 f"{_pct(f.on_line_median(n), ref) if ref else ''}" for f in sims.values()]
-        lines.append(f"| {n} | {_fmt(ref, len(real.on_line.get(n, [])), 1)} | "
-                     + " | ".join(cells) + " |")
+    lines += _per_scv(("workers", "per SCV on the line"), "line", real, sims)
+    lines += _per_scv(("SCVs on the line (window mean)", "per SCV"), "on_line", real, sims)
     lines += ["", "| loops | real (32 replays) | these replays | " + " | ".join(
         f"sim, {k}" for k in names) + " |", "|" + " --- |" * (3 + len(names))]
     for key, want in REAL_TIMINGS.items():
@@ -446,6 +432,24 @@ def table(real: Figures, sims: dict[str, Figures]) -> str:
         "| food_made = 15 × CC + 8 × finished depots | " + " | ".join(
             _share(f) for f in [real, *sims.values()]) + " |"]
     return "\n".join(lines)
+
+
+def _per_scv(head: tuple[str, str], attr: str, real: Figures,
+             sims: dict[str, Figures]) -> list[str]:
+    """Rows of median income per SCV by count (``Figures.line`` or ``Figures.on_line``): the
+    replays, then each drive with its difference from them."""
+    def cell(f: Figures, n: int) -> tuple[float | None, int]:
+        values = getattr(f, attr).get(n, [])
+        return (statistics.median(values) if values else None), len(values)
+
+    lines = ["", f"| {head[0]} | {head[1]}, these replays | " + " | ".join(
+        f"sim, {k}" for k in sims) + " |", "|" + " --- |" * (2 + len(sims))]
+    for n in WORKERS:
+        ref, count = cell(real, n)
+        cells = [f"{_fmt(x, m, 1)} {_pct(x, ref) if ref else ''}"
+                 for x, m in (cell(f, n) for f in sims.values())]
+        lines.append(f"| {n} | {_fmt(ref, count, 1)} | " + " | ".join(cells) + " |")
+    return lines
 
 
 def _fmt(x: float | None, n: int, digits: int = 0) -> str:

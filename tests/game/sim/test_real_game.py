@@ -128,3 +128,13 @@ def test_income_by_scvs_on_the_line(scripted: object) -> None:
                                                            rel=rg.INCOME_TOLERANCE), n
     # patches fill: past two workers a field each, a worker brings less
     assert scripted.on_line_median(20) < 0.95 * scripted.on_line_median(14)
+
+
+def test_the_on_line_measure_by_hand() -> None:
+    """A window's SCVs on the line are its mean workers less its mean builders (a structure under
+    construction over part of the window counts for that part); the bin is their rounding."""
+    out = rg.Figures()
+    rg._on_line(700, 13.25, [(0, rg.NEVER)], 1_000, out)  # 13.25 alive, one builder throughout
+    rg._on_line(700, 14.0, [(880, rg.NEVER)], 1_000, out)  # a builder for the last 120 loops
+    assert out.on_line[12] == [pytest.approx(700 / 12.25)]
+    assert out.on_line[14] == [pytest.approx(700 / 13.5)]

@@ -40,6 +40,7 @@ import torch
 from ppo_gradients import Demonstrations, demonstrate
 
 from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import PARTIAL, publish, write_atomic
 from sc2data.rl import runs
 from sc2data.rl.obs import MACROS
 from sc2data.rl.train import load_config, make_vec_env, new_model
@@ -163,16 +164,20 @@ def main() -> None:
               "balanced": args.balanced,
               "history": history, "untrained_held_out": before, "cloned_held_out": after,
               "log": log}
-    # written beside OUT and renamed into place: an interrupted clone leaves no OUT that looks
-    # like a run
-    tmp = args.out.with_name(f".{args.out.name}.partial")
+    # written beside OUT and published whole (as rl fork does): an interrupted clone leaves no
+    # OUT that looks like a run
+    tmp = args.out.with_name(f".{args.out.name}{PARTIAL}")
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)
-    runs.write_record(tmp / runs.CONFIG, cfg.identity())
-    runs.commit(tmp, model, [], {"config": cfg.identity(), "episodes": []},
-                {"timesteps": 0, "env_steps": 0, "episodes": 0, "resumes": 0})
-    (tmp / "clone.json").write_text(json.dumps(record, indent=1) + "\n")
-    tmp.rename(args.out)
+    try:
+        runs.write_record(tmp / runs.CONFIG, cfg.identity())
+        runs.commit(tmp, model, [], {"config": cfg.identity(), "episodes": []},
+                    {"timesteps": 0, "env_steps": 0, "episodes": 0, "resumes": 0})
+        write_atomic(tmp / "clone.json", (json.dumps(record, indent=1) + "\n").encode())
+        publish(tmp, args.out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
     print(f"wrote {args.out} ({time.perf_counter() - t0:.0f} s); next: sc2data rl evaluate "
           f"{args.out}")
 

@@ -141,7 +141,6 @@ def _read_replay(replay: Any, out: Figures) -> None:
     )
 
     one_base_until: dict[int, int] = {}
-    worker_births: dict[int, list[int]] = collections.defaultdict(list)
     worker_lives: dict[int, list[tuple[int, int]]] = collections.defaultdict(list)
     """Per player, (birth, death) of each worker, the start's included (born at loop 0)."""
     worker_born: dict[int, tuple[int, int]] = {}
@@ -164,8 +163,6 @@ def _read_replay(replay: Any, out: Figures) -> None:
             name = e.unit_type_name
             if name in _WORKER_NAMES:
                 worker_born[e.unit_id] = (e.control_pid, e.frame)
-                if e.frame > 0:
-                    worker_births[e.control_pid].append(e.frame)
             if name == "MULE":
                 end_one_base(e.control_pid, e.frame)
             if name in ("SCV", "Marine") and e.frame > 0:
@@ -250,7 +247,7 @@ def _read_replay(replay: Any, out: Figures) -> None:
             _on_line(e.minerals_collection_rate, alive, builders, loop, out)
         if (loop < FIRST_WINDOW + WINDOW or loop > one_base_until.get(pid, NEVER) or previous != n
                 or e.vespene_collection_rate
-                or any(loop - WINDOW < b <= loop for b in worker_births[pid])):
+                or any(loop - WINDOW < b <= loop for b, _ in worker_lives[pid])):
             continue
         out.income[n].append(e.minerals_collection_rate)
         if races.get(pid) == "Terran":

@@ -533,9 +533,11 @@ def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path
     identity = {**cfg.identity(), "inputs": inputs}
     state = _resume_state(cfg, run, identity)
     if cfg.init_policy is not None and not state["timesteps"]:
-        check_init(cfg, cfg.init_policy, "--init-policy", INIT_MATCH)
+        check_init(cfg, cfg.init_policy, "--init-policy", INIT_MATCH, "a starting policy needs "
+                   "the run's action space, observation and network")
     if cfg.kickstart is not None:
-        check_init(cfg, cfg.kickstart, "--kickstart", TEACHER_MATCH)
+        check_init(cfg, cfg.kickstart, "--kickstart", TEACHER_MATCH, "a teacher needs the run's "
+                   "action space and observation, and the independent policy")
     if state["timesteps"] >= cfg.steps:
         print(f"{run} is already trained for {state['timesteps']} steps (--steps {cfg.steps})")
         return run
@@ -586,22 +588,19 @@ TEACHER_MATCH: tuple[str, ...] = INIT_MATCH[:-1]
 network may be another)."""
 
 
-def check_init(cfg: RLConfig, source: str, option: str, match: tuple[str, ...]) -> None:
+def check_init(cfg: RLConfig, source: str, option: str, match: tuple[str, ...],
+               need: str) -> None:
     """One line unless ``source`` is a trained run (checked by content) that fits this run:
-    the same ``match`` settings, and for a starting policy (``INIT_MATCH``) the same policy."""
+    the same ``match`` settings and the same policy (a teacher's is then the independent one:
+    :func:`check_values`). ``need`` ends the line."""
     src = Path(source)
     init = load_config(src)
     odd = [(k.replace("_", "-"), getattr(init, k), getattr(cfg, k)) for k in match
            if getattr(init, k) != getattr(cfg, k)]
-    if match == INIT_MATCH and resolved_policy(init) != resolved_policy(cfg):
+    if resolved_policy(init) != resolved_policy(cfg):
         odd.append(("policy", resolved_policy(init), resolved_policy(cfg)))
-    if resolved_policy(init) != "independent" and match == TEACHER_MATCH:
-        odd.append(("policy", resolved_policy(init), "independent"))
     if odd:
         name, theirs, ours = odd[0]
-        need = ("a starting policy needs the run's action space, observation and network"
-                if match == INIT_MATCH else "a teacher needs the run's action space and "
-                "observation, and the independent policy")
         raise Sc2DataError(f"{option} {src} was trained with --{name} {theirs} and this run "
                            f"has {ours}; {need}")
 

@@ -87,6 +87,11 @@ class TrainConfig:
     state two commands both describe can be within the threshold (0.5) of both texts only if
     they lie within 1.0 of each other, and 1 puts every two texts ≈ 1 apart; below 1 leaves them
     room (recipes' ``multi_match``). Must stay above the threshold."""
+    confusable_distance: float | None = None
+    """The distance a mismatched pair is trained to when the pair set's recipe lists its text's
+    command as confused with its state's (``mismatch = "confusable"``, the hard negatives):
+    commands that must stay told apart (a depot and a barracks) kept there while
+    ``--mismatch-distance`` lets the others near each other. None = ``--mismatch-distance``."""
     seed: int = 0
     """Seeds Python, numpy, torch and the loader's block order."""
     device: str = "auto"
@@ -136,6 +141,10 @@ class TrainConfig:
         if not (math.isfinite(self.mismatch_distance) and 0.5 < self.mismatch_distance <= 1.0):
             raise Sc2DataError(f"--mismatch-distance must be above the threshold 0.5 and at most "
                                f"1, not {self.mismatch_distance}")
+        d = self.confusable_distance
+        if d is not None and not (math.isfinite(d) and 0.5 < d <= 1.0):
+            raise Sc2DataError(f"--confusable-distance must be above the threshold 0.5 and at "
+                               f"most 1, not {d}")
         if self.threads is not None and self.threads < 1:
             raise Sc2DataError(f"--threads must be at least 1, not {self.threads}")
         if self.epochs > 100_000:
@@ -162,6 +171,7 @@ def train(cfg: TrainConfig) -> Path:
     cfg.validate()
     data = PairSet(cfg.data)
     cfg.name = f"{data.recipe_name}__{cfg.seed}__{time.strftime('%Y%m%d-%H%M%S')}"
+    confused = _confused(cfg, data)
     device = _seed_and_device(cfg)
     splits = {s: data.pairs(s) for s in ("train", "val")}
     if len(splits["train"]) == 0:
@@ -182,7 +192,7 @@ def train(cfg: TrainConfig) -> Path:
                 tqdm.write(f"{run} is a finished run of these settings; nothing to do")
             return run
         trainer = _Trainer.build(cfg, data, texts, device=device, text_t=text_t,
-                                 train_split=train_split, start=start)
+                                 train_split=train_split, start=start, confused=confused)
         loaders = (trainer.loader(splits["train"], train_split, shuffle=True),
                    trainer.loader(splits["val"], val_split, shuffle=False))
         config = _run_config(cfg, trainer, data, texts=texts, run=run)
@@ -199,6 +209,20 @@ def train(cfg: TrainConfig) -> Path:
     for s in (train_split, val_split):
         s.close()
     return run
+
+
+def _confused(cfg: TrainConfig, data: PairSet) -> frozenset[tuple[str, str]]:
+    """(state's command, text's command) pairs the recipe lists as confused, for
+    ``--confusable-distance``; an error if the pair set was built without such a list."""
+    if cfg.confusable_distance is None:
+        return frozenset()
+    pairs = (data.meta.get("recipe") or {}).get("pairs") or {}
+    if pairs.get("mismatch") != "confusable":
+        raise Sc2DataError(f"--confusable-distance needs a pair set whose recipe lists confused "
+                           f"commands (mismatch = \"confusable\"); {data.path} was built with "
+                           f"mismatch = {pairs.get('mismatch', 'uniform')!r}: drop the option")
+    return frozenset((str(a), str(b)) for a, bs in pairs.get("confusable", {}).items()
+                     for b in bs)
 
 
 def _seed_and_device(cfg: TrainConfig) -> Any:
@@ -268,10 +292,13 @@ class _Trainer:
     device: Any
     text_t: Any
     text_of: dict[str, int]
+    confused: frozenset[tuple[str, str]] = frozenset()
+    """(state's command, text's command) pairs trained to ``--confusable-distance``."""
 
     @classmethod
     def build(cls, cfg: TrainConfig, data: PairSet, texts: _Texts, *, device: Any, text_t: Any,
-              train_split: Any, start: dict[str, Any] | None = None) -> _Trainer:
+              train_split: Any, start: dict[str, Any] | None = None,
+              confused: frozenset[tuple[str, str]] = frozenset()) -> _Trainer:
         """The model (input channels and categorical tables from the data's schema, or the
         weights and tables of ``start``, an ``--init`` checkpoint) and Adam."""
         import torch
@@ -295,7 +322,7 @@ class _Trainer:
                                    f"({', '.join([*missing, *unexpected][:3])}); train afresh")
         optimizer = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=cfg.lr)
         return cls(cfg, model, mcfg, optimizer, device, text_t,
-                   {t: i for i, t in enumerate(texts.texts)})
+                   {t: i for i, t in enumerate(texts.texts)}, confused)
 
     @property
     def cuda(self) -> bool:
@@ -309,10 +336,22 @@ class _Trainer:
         cuda = self.cuda
         return PairLoader(packed, pairs.state,
                           np.array([self.text_of[t] for t in pairs.command], np.int64),
-                          pairs.target, batch_size=self.cfg.batch_size,
+                          self.targets(pairs), batch_size=self.cfg.batch_size,
                           keys=self.model.state.keys(), shuffle=shuffle, seed=self.cfg.seed,
                           window=self.cfg.window, transform=None if cuda else self.model.state.pack,
                           collate=lambda rows: M.to_tensors(rows, pin=cuda))
+
+    def targets(self, pairs: Any) -> np.ndarray:
+        """The distance each pair is trained to: 0 matched; ``--mismatch-distance`` mismatched
+        and null, ``--confusable-distance`` for a mismatch among confused commands."""
+        cfg = self.cfg
+        far = pairs.target >= 0.5  # a mismatched or null pair (the pair set's targets are 0 or 1)
+        target = np.where(far, cfg.mismatch_distance, 0.0).astype(np.float32)
+        if cfg.confusable_distance is not None and self.confused:
+            hard = np.array([(str(s), str(t)) in self.confused
+                             for s, t in zip(pairs.label, pairs.command_id)], bool)
+            target[hard & (pairs.kind == "mismatched")] = cfg.confusable_distance
+        return target
 
     def step(self, batch: Any, train: bool) -> Any:
         """One batch; returns (Σ squared error, correct, pairs) as a tensor on the device, so
@@ -326,9 +365,7 @@ class _Trainer:
         if cuda:  # packing runs on the GPU
             x = model.state.pack_torch(x)
         target = torch.from_numpy(batch.target).to(device, non_blocking=cuda)
-        far = target >= 0.5  # a mismatched or null pair (the pair set's targets are 0 or 1)
-        if cfg.mismatch_distance != 1.0:
-            target = torch.where(far, cfg.mismatch_distance, target)
+        far = target > M.THRESHOLD  # a mismatched or null pair (see targets)
         which = torch.from_numpy(batch.text).to(device, non_blocking=cuda)
         with torch.autocast(device.type, dtype=torch.bfloat16, enabled=cfg.amp and cuda):
             d = model(x, self.text_t, which).float()

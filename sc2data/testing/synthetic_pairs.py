@@ -183,11 +183,14 @@ def stacks(schema: Schema, events: list[str | None], seed: int) -> StackBatch:
 
 def write_pairset(out: str | Path, states_per_command: int = 40, null_states: int = 100,
                   episodes: int = 20, seed: int = 0, schema: Schema | None = None,
-                  commands: tuple[dict[str, object], ...] = COMMANDS) -> Path:
+                  commands: tuple[dict[str, object], ...] = COMMANDS,
+                  confusable: dict[str, list[str]] | None = None) -> Path:
     """Write a synthetic pair-set folder (pairs.parquet, pairset.json, packed/*.h5) to ``out``.
 
     A command listing ``train_paraphrases`` gets them drawn into its train-split pairs' texts,
-    as :func:`sc2data.pairs.draw.draw_texts` draws them for a recipe."""
+    as :func:`sc2data.pairs.draw.draw_texts` draws them for a recipe. ``confusable`` (command id
+    → commands) names the mismatches of a listed command's states, recorded as a recipe's
+    ``mismatch = "confusable"`` table (every such mismatch, not a share)."""
     out = Path(out)
     (out / "packed").mkdir(parents=True, exist_ok=True)
     schema = schema or Schema.paper()
@@ -214,9 +217,11 @@ def write_pairset(out: str | Path, states_per_command: int = 40, null_states: in
         n_pairs = 0
         for row, i in enumerate(members):
             label = labels[i]
-            pairs = ([(label, 0.0, "matched"),
-                      (ids[(ids.index(label) + int(rng.integers(1, len(ids)))) % len(ids)], 1.0,
-                       "mismatched")] if label is not None
+            other = (ids[(ids.index(label) + int(rng.integers(1, len(ids)))) % len(ids)]
+                     if label is not None else None)
+            if confusable and label in confusable:
+                other = confusable[label][row % len(confusable[label])]
+            pairs = ([(label, 0.0, "matched"), (other, 1.0, "mismatched")] if label is not None
                      else [(ids[int(rng.integers(len(ids)))], 1.0, "null")])
             for cid, target, kind in pairs:
                 for k, v in zip(rows, (split, row, int(episode[i]), i, cid, text[cid], target,
@@ -246,7 +251,9 @@ def write_pairset(out: str | Path, states_per_command: int = 40, null_states: in
     meta = {
         **PAIRSET.header(),
         "recipe": {"name": "synthetic", "states_per_command": states_per_command,
-                   "null_states": null_states, "episodes": episodes},
+                   "null_states": null_states, "episodes": episodes,
+                   **({"pairs": {"mismatch": "confusable", "confusable": confusable}}
+                      if confusable else {})},
         "recipe_name": "synthetic", "seed": seed, "schema": schema.to_dict(),
         "commands": [dict(c) for c in commands], "splits": counts,
         "fingerprint": pairset_fingerprint(out), "versions": {},

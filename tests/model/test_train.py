@@ -204,6 +204,9 @@ def test_cli_bad_data_is_a_one_line_error(what: str, needles: list[str], data: P
     (["--vectors", "/no/such/vectors.bin"], ["/no/such/vectors.bin", "does not exist"]),
     (["--categorical", "pixels"], ["--categorical", "embed, onehot or scalar"]),
     (["--mismatch-distance", "0.5"], ["--mismatch-distance", "above the threshold 0.5"]),
+    (["--confusable-distance", "1.5"], ["--confusable-distance", "at most 1"]),
+    (["--confusable-distance", "0.9"], ["--confusable-distance", "mismatch = 'uniform'",
+                                        "drop the option"]),
     pytest.param(["--device", "cuda"], ["--device cuda", "no CUDA GPU"],
                  marks=pytest.mark.skipif("__import__('torch').cuda.is_available()")),
 ])
@@ -427,3 +430,39 @@ def test_mismatch_distance_is_what_mismatched_pairs_are_trained_to(data: Path,
     assert near[1] > 0.6  # still mostly beyond the threshold
     config = json.loads((tmp_path / "d07" / "config.json").read_text())
     assert config["mismatch_distance"] == 0.7
+
+
+def test_confusable_distance_keeps_the_confused_commands_apart(tmp_path: Path) -> None:
+    """With mismatches trained to 0.7, the pairs the recipe lists as confused (depot and
+    barracks) trained to 1 instead end further from each other's text than 0.7 leaves them,
+    while a pair not listed (an SCV's states, the minerals' text) stays where 0.7 puts it; the
+    run records the setting. Measured here: 0.42/0.37 → 0.59/0.53, the other 0.37 → 0.37."""
+    from sc2data.model.scorer import load_model
+
+    confused = {"build_supply_depot": ["build_barracks"],
+                "build_barracks": ["build_supply_depot"]}
+    data = tiny_pairset(tmp_path / "data", states_per_command=40, null_states=60,
+                        confusable=confused)
+    ps = PairSet(data)
+    texts, pairs, packed = ps.texts(), ps.pairs("train"), ps.packed("train")
+    stacks = packed.read(0, len(packed))
+
+    def apart(run: Path) -> list[float]:
+        scorer = load_model(run)
+        out = []
+        for state, text in (("build_supply_depot", "build_barracks"),
+                            ("build_barracks", "build_supply_depot"),
+                            ("build_scv", "collect_minerals")):
+            rows = np.unique(pairs.state[pairs.label == state])
+            out.append(float(scorer.distance({k: v[rows] for k, v in stacks.arrays.items()},
+                                             texts[text]).mean()))
+        return out
+
+    near = apart(train_tiny(data, tmp_path / "d07", epochs=6, lr=2e-3, mismatch_distance=0.7))
+    kept = apart(train_tiny(data, tmp_path / "c10", epochs=6, lr=2e-3, mismatch_distance=0.7,
+                            confusable_distance=1.0))
+    print("depot→barracks, barracks→depot, scv→minerals: 0.7", near, "0.7 + 1.0", kept)
+    assert kept[0] > near[0] + 0.1 and kept[1] > near[1] + 0.1
+    assert abs(kept[2] - near[2]) < 0.05
+    config = json.loads((tmp_path / "c10" / "config.json").read_text())
+    assert config["confusable_distance"] == 1.0

@@ -436,8 +436,7 @@ def _per_scv(head: tuple[str, str], attr: str, real: Figures,
     """Rows of median income per SCV by count (``Figures.line`` or ``Figures.on_line``): the
     replays, then each drive with its difference from them."""
     def cell(f: Figures, n: int) -> tuple[float | None, int]:
-        values = getattr(f, attr).get(n, [])
-        return (statistics.median(values) if values else None), len(values)
+        return getattr(f, f"{attr}_median")(n), len(getattr(f, attr).get(n, []))
 
     lines = ["", f"| {head[0]} | {head[1]}, these replays | " + " | ".join(
         f"sim, {k}" for k in sims) + " |", "|" + " --- |" * (2 + len(sims))]

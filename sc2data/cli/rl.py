@@ -110,7 +110,9 @@ def compare_cmd(
                                 "[default: every pair]."),
     reps: int = typer.Option(2000, "--reps", help="Bootstrap resamples."),
     points: int = typer.Option(20, "--points", help="Points of the sample-efficiency curves."),
-    window: int = typer.Option(10, "--window", help="Training episodes per curve point."),
+    window: int = typer.Option(
+        1, "--window", help="Each game's last training episodes per curve point (with 16 "
+                            "games, 1 gives 16 episodes a point)."),
 ) -> None:
     """Per group of runs (action space, reward, narration; seeds pooled): IQM of the final
     scores with 95 % stratified-bootstrap CIs, probability of improvement between groups and

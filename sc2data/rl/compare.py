@@ -15,12 +15,16 @@ and argmax play apart. Per group, over its runs:
 * the **probability of improvement** of one group over another, P(X > Y): the chance that a run
   of X scores above a run of Y, ties counting one half (the Mann–Whitney U over
   ``n_x · n_y``), with its bootstrap CI (runs of each group resampled independently);
-* **sample-efficiency curves**: at ``points`` numbers of decisions between the latest first
-  training episode and the earliest last one of all runs, each run's mean marines over its last
-  ``window`` training episodes ended by then, and the IQM of those over the group's runs with
-  its CI band, and, for each pair of groups compared, the first of those points where X's IQM
-  curve reaches Y's last value (``reach``: how many decisions X needs for what Y ends with,
-  read on the training curves of both, so both are sampled play on training episodes);
+* **sample-efficiency curves**: at ``points`` numbers of decisions from the first where every
+  game of every run has ended a training episode to the earliest last episode of all runs, each
+  run's score — over its games, the mean marines of each game's last ``window`` episodes ended
+  by then — and the IQM of those over the group's runs with its CI band. Every game counts
+  alike: a mean over the run's last episodes, whichever game played them, would begin with the
+  episodes that end first, which in the macro space are the shortest and poorest (a game's
+  marines rise with its decisions). For each pair of groups compared, the first of those
+  points where X's IQM curve reaches Y's last value (``reach``: how many decisions X needs for
+  what Y ends with, read on the training curves of both, so both are sampled play on training
+  episodes);
 * **performance profiles** (rliable's score distributions): the fraction of the group's runs
   whose final sampled score exceeds τ, for :data:`PROFILE_POINTS` values of τ from 0 to the
   best run's score, with a 95 % bootstrap band — the whole spread of runs, where the IQM
@@ -61,8 +65,11 @@ class RunScores:
     """Mean marines per evaluation episode, by play mode (:data:`MODES`)."""
     seeds: tuple[int, ...]
     decisions: int
-    curve: tuple[np.ndarray, np.ndarray]
-    """Training episodes: decisions (all envs) when each ended, marines made."""
+    curve: tuple[np.ndarray, np.ndarray, np.ndarray]
+    """Training episodes: decisions (all envs) when each ended, marines made, the game
+    (``env``) that played it."""
+    games: int
+    """Games the run stepped together (``--envs``)."""
 
 
 def require_rliable() -> None:
@@ -170,17 +177,33 @@ def reach(decisions: Sequence[int], curve: Sequence[float], target: float) -> in
     return None
 
 
-def curve_scores(curve: tuple[np.ndarray, np.ndarray], at: np.ndarray, window: int
-                 ) -> np.ndarray:
-    """A run's score at each number of decisions in ``at``: its mean marines over the last
-    ``window`` training episodes ended by then (NaN before its first)."""
-    ends, marines = curve
+def curve_scores(curve: tuple[np.ndarray, np.ndarray, np.ndarray], games: int,
+                 at: np.ndarray, window: int) -> np.ndarray:
+    """A run's score at each number of decisions in ``at``: over its ``games`` games, the mean
+    of each game's marines over its last ``window`` training episodes ended by then (NaN until
+    every game has ended one)."""
+    ends, marines, played = curve
+    per_game = [(ends[played == g], marines[played == g]) for g in range(games)]
     out = np.full(len(at), np.nan)
     for i, x in enumerate(at):
-        n = int(np.searchsorted(ends, x, side="right"))
-        if n:
-            out[i] = float(np.mean(marines[max(0, n - window):n]))
+        means = []
+        for e, m in per_game:
+            n = int(np.searchsorted(e, x, side="right"))
+            if not n:
+                break
+            means.append(float(np.mean(m[max(0, n - window):n])))
+        else:
+            out[i] = float(np.mean(means))
     return out
+
+
+def every_game_ended(curve: tuple[np.ndarray, np.ndarray, np.ndarray], games: int
+                     ) -> float | None:
+    """The decisions by which every one of the run's ``games`` games had ended a training
+    episode (None: one never did)."""
+    ends, _, played = curve
+    firsts = [ends[played == g] for g in range(games)]
+    return None if any(not len(f) for f in firsts) else max(float(f[0]) for f in firsts)
 
 
 # -- runs -------------------------------------------------------------------------------------
@@ -196,10 +219,11 @@ def load_run(run: Path) -> RunScores:
     ev = read_eval(run)
     rows = read_curve(run)
     curve = (np.array([r["timesteps"] for r in rows], dtype=float),
-             np.array([r["marines"] for r in rows], dtype=float))
+             np.array([r["marines"] for r in rows], dtype=float),
+             np.array([r["env"] for r in rows], dtype=int))
     return RunScores(run, config, {m: float(ev[m]["mean"]) for m in MODES},
                      tuple(int(s) for s in ev["seeds"]), int(ev.get("trained_timesteps") or 0),
-                     curve)
+                     curve, int(config.get("envs") or 1))
 
 
 DRAWS: tuple[str, ...] = ("seed", "env_groups")
@@ -280,7 +304,7 @@ def check_comparable(runs: Sequence[RunScores]) -> None:
 # -- the comparison ---------------------------------------------------------------------------
 
 def compare(runs: Sequence[Path], out: Path | None = None, *, baselines: Path | None = None,
-            against: str | None = None, reps: int = 2000, points: int = 20, window: int = 10,
+            against: str | None = None, reps: int = 2000, points: int = 20, window: int = 1,
             seed: int = 0) -> dict[str, Any]:
     """Compare the groups the runs form (see the module docstring). Writes ``OUT/compare.json``
     and ``OUT/compare.png`` (sample-efficiency curves and final IQMs) when ``out`` is given;
@@ -367,17 +391,18 @@ def _curves(groups: dict[str, list[RunScores]], points: int, window: int, reps: 
     """Sample-efficiency curves (see the module docstring); empty where the runs' training
     episodes do not overlap."""
     all_runs = [r for members in groups.values() for r in members]
-    if any(not len(r.curve[0]) for r in all_runs):
+    starts = [every_game_ended(r.curve, r.games) for r in all_runs]
+    if any(s is None for s in starts):
         return {}
-    lo = max(float(r.curve[0][0]) for r in all_runs)
+    lo = max(s for s in starts if s is not None)
     hi = min(float(r.curve[0][-1]) for r in all_runs)
     if hi < lo:
         return {}
     at = np.unique(np.linspace(lo, hi, points).round())
-    tables = {g: np.array([[curve_scores(r.curve, at, window)] for r in members])
+    tables = {g: np.array([[curve_scores(r.curve, r.games, at, window)] for r in members])
               for g, members in groups.items()}
     point, interval = curve_intervals(tables, reps, seed)
-    return {"decisions": [int(x) for x in at], "window": window,
+    return {"decisions": [int(x) for x in at], "window": window, "per": "game",
             "groups": {g: {"iqm": [float(v) for v in point[g]],
                            "lo": [float(v) for v in interval[g][0]],
                            "hi": [float(v) for v in interval[g][1]]} for g in groups}}
@@ -421,7 +446,7 @@ def _figure(record: dict[str, Any], window: int) -> bytes:
         plot_utils.plot_sample_efficiency_curve(
             np.array(curves["decisions"]), point, band, algorithms=names, colors=colors,
             xlabel="decisions (all envs)",
-            ylabel=f"marines per episode, IQM over runs\n(mean of the last ≤ {window} "
+            ylabel=f"marines per episode, IQM over runs\n(each game's last ≤ {window} "
                    "episodes)", ax=left,
             labelsize="medium", ticklabelsize="small")
     else:

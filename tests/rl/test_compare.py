@@ -14,6 +14,7 @@ from sc2data.rl import runs
 from sc2data.rl.compare import (
     above,
     curve_scores,
+    every_game_ended,
     improvement,
     improvement_intervals,
     iqm,
@@ -95,10 +96,20 @@ def test_reach_is_the_first_point_at_or_above_the_target() -> None:
     assert reach([10, 20, 30], [1.0, 3.0, 2.0], 3.5) is None
 
 
-def test_curve_scores_average_the_last_window_episodes_ended_by_each_point() -> None:
-    curve = (np.array([10.0, 20.0, 30.0]), np.array([1.0, 2.0, 6.0]))
-    got = curve_scores(curve, np.array([5.0, 10.0, 25.0, 30.0]), window=2)
-    assert np.isnan(got[0]) and got[1:].tolist() == [1.0, 1.5, 4.0]
+def test_curve_scores_count_every_game_alike_from_when_each_has_ended_an_episode() -> None:
+    # game 0 ends short, poor episodes at 10, 20, 30; game 1 its first, long and rich one at 25:
+    # a mean over the run's last episodes would read 1 at 10 and 24, game 0 alone
+    curve = (np.array([10.0, 20.0, 25.0, 30.0]), np.array([1.0, 3.0, 9.0, 5.0]),
+             np.array([0, 0, 1, 0]))
+    assert every_game_ended(curve, 2) == 25.0
+    assert every_game_ended(curve, 3) is None  # a third game never ended one
+    at = np.array([10.0, 24.0, 25.0, 30.0])
+    got = curve_scores(curve, 2, at, window=1)
+    assert np.isnan(got[:2]).all() and got[2:].tolist() == [(3 + 9) / 2, (5 + 9) / 2]
+    got = curve_scores(curve, 2, at, window=2)  # each game's last two: (1, 3) then (3, 5)
+    assert got[2:].tolist() == [(2 + 9) / 2, (4 + 9) / 2]
+    one = (curve[0], curve[1], np.zeros(4, int))  # one game: its last episodes, as before
+    assert curve_scores(one, 1, np.array([5.0, 20.0, 30.0]), window=2)[1:].tolist() == [2.0, 7.0]
 
 
 # -- run folders ------------------------------------------------------------------------------
@@ -109,7 +120,7 @@ def fake_run(path: Path, sampled: list[int], argmax: list[int] | None = None,
     """A run folder as sc2data rl train and evaluate leave it, with hand-chosen figures: a
     curve of 4 episodes of 100 decisions, an eval.json of ``sampled``/``argmax`` marines;
     ``inputs``: the digests of what the reward reads, as config.json records them."""
-    cfg = RLConfig(out=str(path), **settings)
+    cfg = RLConfig(out=str(path), **{"envs": 1, **settings})  # one game plays the curve
     path.mkdir(parents=True)
     _write_json(path / "config.json", {**cfg.identity(), **({"inputs": inputs} if inputs else {})})
     (path / "model.zip").write_bytes(b"")
@@ -169,12 +180,13 @@ def test_compare_groups_seeds_and_reports_hand_computed_figures(
     assert curves["decisions"][0] == 100 and curves["decisions"][-1] == 400
     assert "P(paper, narration > paper, sparse) = 0.58" in text
     assert "reference uniform-paper (paper): 14.00" in text
-    # reach: training curves m·e at 100·(e+1) decisions, window 10, so each run's score is
-    # 0, m/2, m, 1.5m; narration's IQM (m = 2, 3) 0, 1.25, 2.5, 3.75, sparse's mean (m = 0, 2, 4)
-    # 0, 1, 2, 3: narration reaches 3 only at 400; sparse never reaches 3.75
+    # reach: training curves m·e at 100·(e+1) decisions, one game, window 1, so each run's
+    # score is its last episode's: 0, m, 2m, 3m; narration's IQM (m = 2, 3) 0, 2.5, 5, 7.5,
+    # sparse's mean (m = 0, 2, 4) 0, 2, 4, 6: narration reaches 6 only at 400; sparse never 7.5
+    assert record["curves"]["per"] == "game" and record["curves"]["window"] == 1
     assert [(r["x"], r["target"], r["decisions"], r["of"]) for r in record["reach"]] == \
-        [("paper, narration", 3.0, 400, 400)]
-    assert "paper, narration reaches paper, sparse's last training IQM (3.00) at 400 of 400 " \
+        [("paper, narration", 6.0, 400, 400)]
+    assert "paper, narration reaches paper, sparse's last training IQM (6.00) at 400 of 400 " \
         "decisions (1.00)" in text
     # performance profiles: 101 thresholds from 0 to the best run's 4
     prof = record["profiles"]
@@ -190,7 +202,7 @@ def test_compare_groups_seeds_and_reports_hand_computed_figures(
                                "--reps", "100"], capsys)
     assert code == 0, err
     assert "P(paper, sparse > paper, narration) = 0.42" in text
-    assert "paper, sparse reaches paper, narration's last training IQM (3.75) nowhere in 400 " \
+    assert "paper, sparse reaches paper, narration's last training IQM (7.50) nowhere in 400 " \
         "decisions" in text
 
 

@@ -137,6 +137,8 @@ def agreement_cmd(
         None, "--threshold", help="MEM match threshold [default: the model's, 0.5]."),
     out: Optional[Path] = typer.Option(None, "--out",
                                        help="JSON file [default: RUN/agreement.json]."),
+    progress: Optional[bool] = typer.Option(None, "--progress/--no-progress",
+                                            help="Progress bar [default: on a terminal]."),
 ) -> None:
     """On the states a trained policy visits: per command, how often the MEM's match agrees
     with the labelling rule (precision, recall and F1, the rule as ground truth; recall also
@@ -147,7 +149,7 @@ def agreement_cmd(
 
     require_rl("sc2data rl agreement")
     for line in summary(agreement(run, mem, episodes=episodes, deterministic=deterministic,
-                                  threshold=threshold, out=out)):
+                                  threshold=threshold, out=out, progress=progress)):
         typer.echo(line)
 
 

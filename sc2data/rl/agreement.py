@@ -54,6 +54,7 @@ from typing import Any
 import numpy as np
 
 from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.progress import bar
 from sc2data.ground.vocab import STEP_MUL
 from sc2data.rl import runs
 from sc2data.rl.runs import check_file_out, write_file
@@ -126,10 +127,12 @@ def _f1(tp: int, fp: int, fn: int) -> float | None:
 
 
 def agreement(run: Path, mem: Path, *, episodes: int = 3, deterministic: bool = False,
-              threshold: float | None = None, out: Path | None = None) -> dict[str, Any]:
+              threshold: float | None = None, out: Path | None = None,
+              progress: bool | None = None) -> dict[str, Any]:
     """Play ``episodes`` episodes of the policy in ``run``; per-command agreement of the MEM in
     ``mem`` with the rules on the stacks visited, and the two rewards' correlation and EPIC
-    distance. Written to ``out`` (default ``RUN/agreement.json``) and returned."""
+    distance. Written to ``out`` (default ``RUN/agreement.json``) and returned. ``progress``:
+    a bar over the episodes (None: as :func:`~sc2data.ground.progress.bar` decides)."""
     from sc2data.rl.train import load_config, require_rl
 
     require_rl("sc2data rl agreement")
@@ -144,7 +147,8 @@ def agreement(run: Path, mem: Path, *, episodes: int = 3, deterministic: bool = 
 
     torch.set_num_threads(1)
     judge = _Judge.load(mem, threshold)
-    seen = _play(run, cfg, judge, episodes=episodes, deterministic=deterministic)
+    seen = _play(run, cfg, judge, episodes=episodes, deterministic=deterministic,
+                 progress=progress)
     n = len(judge.ids)
     fired = np.concatenate(seen.fired) if seen.fired else np.zeros((0, n), bool)
     matched = np.concatenate(seen.matched) if seen.matched else np.zeros((0, n), bool)
@@ -234,7 +238,8 @@ class _Seen:
     (:func:`sc2data.labels.truth.truth`)."""
 
 
-def _play(run: Path, cfg: Any, judge: _Judge, *, episodes: int, deterministic: bool) -> _Seen:
+def _play(run: Path, cfg: Any, judge: _Judge, *, episodes: int, deterministic: bool,
+          progress: bool | None = None) -> _Seen:
     """Play the policy's episodes, judge every stack, and draw each episode's share of the EPIC
     sample."""
     from sc2data.labels.truth import truth
@@ -253,25 +258,28 @@ def _play(run: Path, cfg: Any, judge: _Judge, *, episodes: int, deterministic: b
     pick = np.random.default_rng(AGREEMENT_SEED)
     seen = _Seen()
     try:
-        for e in range(episodes):
-            rule_frames: list[Any] = []
-            mem_frames: list[Any] = []
-            happened: list[np.ndarray] = []
-            for info in play(model, env, AGREEMENT_SEED + e, deterministic):  # noqa: B007
-                new = env.frames if not rule_frames else env.frames[1:]
-                rule_frames += [judge.rule_schema.extract(f) for f in new]
-                mem_frames += [judge.scorer.schema.extract(f) for f in new]
-                happened += [truth(events, judge.ids) for events in env.events]
-                seen.actions += [str(info["action"])] * (len(env.frames) - 1)
-            seen.marines.append(int(info["marines"]))
-            steps = np.arange(len(rule_frames) - 1)
-            if not len(steps):
-                continue
-            fired, matched = judge(rule_frames, mem_frames, steps, steps + 1)
-            seen.fired.append(fired)
-            seen.matched.append(matched)
-            seen.happened.append(np.array(happened, bool).reshape(len(steps), len(judge.ids)))
-            _sample(seen, rule_frames, mem_frames, steps, pick=pick, episodes=episodes)
+        with bar(episodes, desc="rl agreement", unit="episode", show=progress) as b:
+            for e in range(episodes):
+                rule_frames: list[Any] = []
+                mem_frames: list[Any] = []
+                happened: list[np.ndarray] = []
+                for info in play(model, env, AGREEMENT_SEED + e, deterministic):  # noqa: B007
+                    new = env.frames if not rule_frames else env.frames[1:]
+                    rule_frames += [judge.rule_schema.extract(f) for f in new]
+                    mem_frames += [judge.scorer.schema.extract(f) for f in new]
+                    happened += [truth(events, judge.ids) for events in env.events]
+                    seen.actions += [str(info["action"])] * (len(env.frames) - 1)
+                seen.marines.append(int(info["marines"]))
+                steps = np.arange(len(rule_frames) - 1)
+                if not len(steps):
+                    b.update(1)
+                    continue
+                fired, matched = judge(rule_frames, mem_frames, steps, steps + 1)
+                seen.fired.append(fired)
+                seen.matched.append(matched)
+                seen.happened.append(np.array(happened, bool).reshape(len(steps), len(judge.ids)))
+                _sample(seen, rule_frames, mem_frames, steps, pick=pick, episodes=episodes)
+                b.update(1)
     finally:
         env.close()
     return seen

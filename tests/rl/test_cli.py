@@ -194,11 +194,12 @@ def test_agreement_counts_add_up_and_follow_the_threshold(
     code, _, err = run_cli(["rl", "train", "--out", run, *TINY], capsys)
     assert code == 0, err
     results = {}
-    for threshold in ("0", "100"):
+    for threshold, progress in (("0", "--no-progress"), ("100", "--progress")):
         out = tmp_path / f"agree-{threshold}.json"
         code, text, err = run_cli(["rl", "agreement", run, "--mem", mem_run, "--episodes", "1",
-                                   "--threshold", threshold, "--out", out], capsys)
+                                   "--threshold", threshold, "--out", out, progress], capsys)
         assert code == 0, err
+        assert ("rl agreement" in err) == (progress == "--progress")  # the episodes' bar
         assert "precision" in text and "build_scv" in text
         results[threshold] = json.loads(out.read_text())
     never, always = results["0"], results["100"]

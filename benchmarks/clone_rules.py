@@ -18,8 +18,16 @@ run, and
 ``benchmarks/policy_trace.py OUT`` traces it, and ``sc2data rl train --init-policy OUT`` starts
 PPO from it; ``OUT/clone.json`` records what was fitted.
 
+``--dagger R`` then runs R rounds of DAgger (Ross et al. 2011): the clone plays
+``--dagger-episodes`` episodes of its own (seeds apart from the rules'; argmax on even episodes,
+sampled on odd), the rules label every state it reaches with the macro they would choose there
+(their timers set from the clone's own choices), those decisions join the training set and the
+fit goes on ``--dagger-epochs`` epochs. A clone fitted to the rules' states alone meets states
+the rules never reach once its first choice differs; DAgger trains it on them. Each round's
+marines (the clone's own episodes, argmax and sampled) are printed and recorded.
+
     python benchmarks/clone_rules.py RUN --out OUT [--episodes 16] [--held-out 2] [--epochs 30]
-        [--history] [--balanced]
+        [--history] [--balanced] [--dagger 0] [--dagger-episodes 8] [--dagger-epochs 10]
 
 ``--history`` gives the policy the time since each macro last acted (``rl train --history``),
 which the rules' own timers use and the screen does not show.
@@ -37,7 +45,7 @@ from typing import Any
 
 import numpy as np
 import torch
-from ppo_gradients import Demonstrations, demonstrate
+from ppo_gradients import DEMO_SEED, Demonstrations, demonstrate, joined
 
 from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.files import PARTIAL, publish, write_atomic
@@ -111,6 +119,42 @@ def fit(policy: Any, demos: Demonstrations, train: np.ndarray, test: np.ndarray,
     return log
 
 
+DAGGER_SEED = DEMO_SEED + 100_000
+"""Round r's episode e is seeded ``DAGGER_SEED + 1,000·r + e``: apart from the rules' episodes
+(``DEMO_SEED`` on), training's and evaluation's."""
+
+
+def dagger_round(model: Any, cfg: Any, demos: Demonstrations, train: np.ndarray,
+                 test: np.ndarray, r: int, args: argparse.Namespace
+                 ) -> tuple[Demonstrations, np.ndarray, dict[str, Any]]:
+    """One round of DAgger (see the module docstring): the clone's episodes labelled by the
+    rules join the training decisions, and the fit goes on."""
+    t0 = time.perf_counter()
+    played: dict[str, list[int]] = {"argmax": [], "sampled": []}
+    new = None
+    for e in range(args.dagger_episodes):
+        mode = "argmax" if e % 2 == 0 else "sampled"
+        d = demonstrate(cfg, 1, model, label=True, deterministic=mode == "argmax",
+                        first_seed=DAGGER_SEED + 1000 * r + e)
+        played[mode] += d.marines
+        new = d if new is None else joined(new, d)
+    assert new is not None
+    agree = float(np.mean(predictions(model.policy, new, np.arange(len(new.actions)))
+                          == new.actions))
+    start = len(demos.actions)
+    demos = joined(demos, new)
+    train = np.concatenate([train, np.arange(start, len(demos.actions))])
+    print(f"DAgger round {r}: the clone made {np.mean(played['argmax']):.1f} marines by argmax, "
+          f"{np.mean(played['sampled']):.1f} sampled; {len(new.actions)} decisions, its argmax "
+          f"the rules' choice at {agree:.3f} of them ({time.perf_counter() - t0:.0f} s)",
+          flush=True)
+    log = fit(model.policy, demos, train, test, args.dagger_epochs, args.lr, cfg.seed + r,
+              args.balanced)
+    return demos, train, {"round": r, "argmax_marines": played["argmax"],
+                          "sampled_marines": played["sampled"], "decisions": int(len(new.actions)),
+                          "agreement_before": agree, "log": log}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run", type=Path, help="a macro-space run whose settings the clone takes")
@@ -123,10 +167,16 @@ def main() -> None:
                     help="weight each macro by the inverse of its share of the decisions")
     ap.add_argument("--history", action=argparse.BooleanOptionalAction, default=None,
                     help="the time since each macro last acted (default: as the run)")
+    ap.add_argument("--dagger", type=int, default=0, help="DAgger rounds after the first fit")
+    ap.add_argument("--dagger-episodes", type=int, default=8, help="the clone's episodes a round")
+    ap.add_argument("--dagger-epochs", type=int, default=10, help="epochs of fitting a round")
     args = ap.parse_args()
     if args.episodes <= args.held_out or args.held_out < 1 or args.epochs < 1:
         raise SystemExit("clone_rules.py: --held-out must be at least 1 and below --episodes, "
                          "--epochs at least 1")
+    if args.dagger < 0 or args.dagger_episodes < 1 or args.dagger_epochs < 1:
+        raise SystemExit("clone_rules.py: --dagger must be at least 0, --dagger-episodes and "
+                         "--dagger-epochs at least 1")
     if args.out.exists():
         raise SystemExit(f"clone_rules.py: {args.out} exists; pick another --out")
     try:
@@ -156,6 +206,14 @@ def main() -> None:
                   args.balanced)
         after = recalls(model.policy, demos, test)
         print(f"the cloned policy, held out: {after}", flush=True)
+        rounds = []
+        for r in range(1, args.dagger + 1):
+            demos, train, row = dagger_round(model, cfg, demos, train, test, r, args)
+            log += row.pop("log")
+            rounds.append(row)
+        if rounds:
+            after = recalls(model.policy, demos, test)
+            print(f"after DAgger, held out: {after}", flush=True)
     finally:
         vec.close()
     record = {"like": str(args.run), "episodes": args.episodes, "held_out": args.held_out,
@@ -163,7 +221,8 @@ def main() -> None:
               "rules_decisions": shares, "epochs": args.epochs, "lr": args.lr,
               "balanced": args.balanced,
               "history": history, "untrained_held_out": before, "cloned_held_out": after,
-              "log": log}
+              "log": log, "dagger": {"rounds": rounds, "episodes": args.dagger_episodes,
+                                     "epochs": args.dagger_epochs}}
     # written beside OUT and published whole (as rl fork does): an interrupted clone leaves no
     # OUT that looks like a run
     tmp = args.out.with_name(f".{args.out.name}{PARTIAL}")

@@ -55,9 +55,13 @@ class Demonstrations:
     """Which episode (0-based) each decision is of."""
 
 
-def demonstrate(cfg: RLConfig, episodes: int, model: Any = None) -> Demonstrations:
-    """Play ``episodes`` of the run's env with the macro-rules agent choosing (macro space), or
-    ``model``'s policy (sampled) when given."""
+def demonstrate(cfg: RLConfig, episodes: int, model: Any = None, *, label: bool = False,
+                deterministic: bool = False, first_seed: int = DEMO_SEED) -> Demonstrations:
+    """Play ``episodes`` of the run's env (episode ``e`` seeded ``first_seed + e``) with the
+    macro-rules agent choosing (macro space), or ``model``'s policy when given (argmax with
+    ``deterministic``, else sampled). ``label`` (with ``model``): the policy plays and each
+    decision records the macro the rules would choose there instead (DAgger's labels), the
+    rules' timers read from the policy's own choices (when it last chose each macro)."""
     env = BuildMarinesGym(cfg.action_space, backend=cfg.backend, obs=cfg.obs_config(),
                           game_loops=game_loops(cfg), merge_waits=cfg.merge_waits,
                           sites=cfg.macro_sites)
@@ -65,22 +69,29 @@ def demonstrate(cfg: RLConfig, episodes: int, model: Any = None) -> Demonstratio
     obs, masks, chosen, returns, marines, episode = [], [], [], [], [], []
     try:
         for e in range(episodes):
-            o, info = env.reset(seed=DEMO_SEED + e)
+            o, info = env.reset(seed=first_seed + e)
             agent.reset()
             if model is not None:
-                model.set_random_seed(DEMO_SEED + e)
+                model.set_random_seed(first_seed + e)
             rewards, steps, done = [], [], False
+            last: dict[str, int] = {}  # the policy's choices, as the rules keep their own
             while not done:
+                step = info["game_loop"] // STEP_MUL
                 if model is None:
-                    agent.view, agent.steps = env.view, info["game_loop"] // STEP_MUL
-                    action = MACROS.index(agent.choose())
+                    agent.view, agent.steps = env.view, step
+                    played = action = MACROS.index(agent.choose())
                 else:
-                    action = model.predict(o, action_masks=env.action_masks())[0]
+                    played = action = int(model.predict(o, action_masks=env.action_masks(),
+                                                        deterministic=deterministic)[0])
+                    if label:  # the rules' timers set to the policy's history, then asked
+                        agent.view, agent.steps, agent._last = env.view, step, dict(last)
+                        action = MACROS.index(agent.choose())
+                    last[MACROS[played]] = step
                 obs.append(o)
                 masks.append(env.action_masks())
                 chosen.append(action)
                 episode.append(e)
-                o, reward, done, _, info = env.step(action)
+                o, reward, done, _, info = env.step(played)
                 rewards.append(float(reward))
                 steps.append(int(info["env_steps"]) if cfg.smdp else 1)
             g, back = 0.0, []
@@ -94,6 +105,15 @@ def demonstrate(cfg: RLConfig, episodes: int, model: Any = None) -> Demonstratio
     return Demonstrations({k: np.stack([x[k] for x in obs]) for k in obs[0]}, np.stack(masks),
                           np.asarray(chosen, np.int64), np.asarray(returns, np.float32), marines,
                           np.asarray(episode, np.int64))
+
+
+def joined(a: Demonstrations, b: Demonstrations) -> Demonstrations:
+    """``a``'s decisions then ``b``'s (``b``'s episodes numbered after ``a``'s)."""
+    return Demonstrations({k: np.concatenate([a.obs[k], b.obs[k]]) for k in a.obs},
+                          np.concatenate([a.masks, b.masks]),
+                          np.concatenate([a.actions, b.actions]),
+                          np.concatenate([a.returns, b.returns]), a.marines + b.marines,
+                          np.concatenate([a.episodes, b.episodes + len(a.marines)]))
 
 
 def norm(loss: torch.Tensor, params: list[torch.nn.Parameter]) -> float:

@@ -22,12 +22,16 @@ PPO from it; ``OUT/clone.json`` records what was fitted.
 ``--dagger-episodes`` episodes of its own (seeds apart from the rules'; argmax on even episodes,
 sampled on odd), the rules label every state it reaches with the macro they would choose there
 (their timers set from the clone's own choices), those decisions join the training set and the
-fit goes on ``--dagger-epochs`` epochs. A clone fitted to the rules' states alone meets states
-the rules never reach once its first choice differs; DAgger trains it on them. Each round's
-marines (the clone's own episodes, argmax and sampled) are printed and recorded.
+fit goes on ``--dagger-epochs`` epochs at ``--dagger-lr``. A clone fitted to the rules' states
+alone meets states the rules never reach once its first choice differs; DAgger trains it on
+them. Each round's marines (the clone's own episodes, argmax and sampled) are printed and
+recorded; a last round of episodes measures the last fit, and the policy kept is the one whose
+round made the most marines by argmax (DAgger's choice of the best policy of the sequence, on
+training-side seeds: the evaluation episodes stay unseen).
 
     python benchmarks/clone_rules.py RUN --out OUT [--episodes 16] [--held-out 2] [--epochs 30]
         [--history] [--balanced] [--dagger 0] [--dagger-episodes 8] [--dagger-epochs 10]
+        [--dagger-lr 3e-4]
 
 ``--history`` gives the policy the time since each macro last acted (``rl train --history``),
 which the rules' own timers use and the screen does not show.
@@ -36,6 +40,7 @@ which the rules' own timers use and the screen does not show.
 from __future__ import annotations
 
 import argparse
+import copy
 import dataclasses
 import json
 import shutil
@@ -124,15 +129,14 @@ DAGGER_SEED = DEMO_SEED + 100_000
 (``DEMO_SEED`` on), training's and evaluation's."""
 
 
-def dagger_round(model: Any, cfg: Any, demos: Demonstrations, train: np.ndarray,
-                 test: np.ndarray, r: int, args: argparse.Namespace
-                 ) -> tuple[Demonstrations, np.ndarray, dict[str, Any]]:
-    """One round of DAgger (see the module docstring): the clone's episodes labelled by the
-    rules join the training decisions, and the fit goes on."""
-    t0 = time.perf_counter()
+def dagger_episodes(model: Any, cfg: Any, r: int, episodes: int
+                    ) -> tuple[Demonstrations, dict[str, list[int]], float]:
+    """Round ``r``'s episodes of the clone (argmax on even ones, sampled on odd), every state
+    labelled by the rules; the marines of each mode and how often the clone's most likely macro
+    was the rules' choice."""
     played: dict[str, list[int]] = {"argmax": [], "sampled": []}
     new = None
-    for e in range(args.dagger_episodes):
+    for e in range(episodes):
         mode = "argmax" if e % 2 == 0 else "sampled"
         d = demonstrate(cfg, 1, model, label=True, deterministic=mode == "argmax",
                         first_seed=DAGGER_SEED + 1000 * r + e)
@@ -141,18 +145,41 @@ def dagger_round(model: Any, cfg: Any, demos: Demonstrations, train: np.ndarray,
     assert new is not None
     agree = float(np.mean(predictions(model.policy, new, np.arange(len(new.actions)))
                           == new.actions))
-    start = len(demos.actions)
-    demos = joined(demos, new)
-    train = np.concatenate([train, np.arange(start, len(demos.actions))])
-    print(f"DAgger round {r}: the clone made {np.mean(played['argmax']):.1f} marines by argmax, "
-          f"{np.mean(played['sampled']):.1f} sampled; {len(new.actions)} decisions, its argmax "
-          f"the rules' choice at {agree:.3f} of them ({time.perf_counter() - t0:.0f} s)",
-          flush=True)
-    log = fit(model.policy, demos, train, test, args.dagger_epochs, args.lr, cfg.seed + r,
-              args.balanced)
-    return demos, train, {"round": r, "argmax_marines": played["argmax"],
-                          "sampled_marines": played["sampled"], "decisions": int(len(new.actions)),
-                          "agreement_before": agree, "log": log}
+    return new, played, agree
+
+
+def dagger(model: Any, cfg: Any, demos: Demonstrations, train: np.ndarray, test: np.ndarray,
+           args: argparse.Namespace) -> tuple[Demonstrations, list[dict[str, Any]], list[Any]]:
+    """``args.dagger`` rounds (see the module docstring), then one more round of episodes that
+    only measures the last fit; the model is left with the policy whose round made the most
+    marines by argmax (round r measures the policy fitted before it). Returns the aggregate,
+    the rounds' records and the fits' log."""
+    rounds: list[dict[str, Any]] = []
+    policies, log = [], []
+    for r in range(1, args.dagger + 2):
+        t0 = time.perf_counter()
+        new, played, agree = dagger_episodes(model, cfg, r, args.dagger_episodes)
+        policies.append(copy.deepcopy(model.policy.state_dict()))
+        rounds.append({"round": r, "argmax_marines": played["argmax"],
+                       "sampled_marines": played["sampled"], "decisions": int(len(new.actions)),
+                       "agreement": agree})
+        print(f"DAgger round {r}: the clone made {np.mean(played['argmax']):.1f} marines by "
+              f"argmax, {np.mean(played['sampled']):.1f} sampled; {len(new.actions)} decisions, "
+              f"its argmax the rules' choice at {agree:.3f} of them "
+              f"({time.perf_counter() - t0:.0f} s)", flush=True)
+        if r > args.dagger:
+            break
+        start = len(demos.actions)
+        demos = joined(demos, new)
+        train = np.concatenate([train, np.arange(start, len(demos.actions))])
+        log += fit(model.policy, demos, train, test, args.dagger_epochs, args.dagger_lr,
+                   cfg.seed + r, args.balanced)
+    best = max(range(len(rounds)), key=lambda i: (np.mean(rounds[i]["argmax_marines"]), i))
+    model.policy.load_state_dict(policies[best])
+    for i, row in enumerate(rounds):
+        row["kept"] = i == best
+    print(f"kept the policy round {best + 1} played", flush=True)
+    return demos, rounds, log
 
 
 def main() -> None:
@@ -170,13 +197,15 @@ def main() -> None:
     ap.add_argument("--dagger", type=int, default=0, help="DAgger rounds after the first fit")
     ap.add_argument("--dagger-episodes", type=int, default=8, help="the clone's episodes a round")
     ap.add_argument("--dagger-epochs", type=int, default=10, help="epochs of fitting a round")
+    ap.add_argument("--dagger-lr", type=float, default=3e-4, help="Adam's step in the rounds")
     args = ap.parse_args()
     if args.episodes <= args.held_out or args.held_out < 1 or args.epochs < 1:
         raise SystemExit("clone_rules.py: --held-out must be at least 1 and below --episodes, "
                          "--epochs at least 1")
-    if args.dagger < 0 or args.dagger_episodes < 1 or args.dagger_epochs < 1:
+    if args.dagger < 0 or args.dagger_episodes < 1 or args.dagger_epochs < 1 or \
+            args.dagger_lr <= 0:
         raise SystemExit("clone_rules.py: --dagger must be at least 0, --dagger-episodes and "
-                         "--dagger-epochs at least 1")
+                         "--dagger-epochs at least 1, --dagger-lr above 0")
     if args.out.exists():
         raise SystemExit(f"clone_rules.py: {args.out} exists; pick another --out")
     try:
@@ -206,12 +235,10 @@ def main() -> None:
                   args.balanced)
         after = recalls(model.policy, demos, test)
         print(f"the cloned policy, held out: {after}", flush=True)
-        rounds = []
-        for r in range(1, args.dagger + 1):
-            demos, train, row = dagger_round(model, cfg, demos, train, test, r, args)
-            log += row.pop("log")
-            rounds.append(row)
-        if rounds:
+        rounds: list[dict[str, Any]] = []
+        if args.dagger:
+            demos, rounds, more = dagger(model, cfg, demos, train, test, args)
+            log += more
             after = recalls(model.policy, demos, test)
             print(f"after DAgger, held out: {after}", flush=True)
     finally:
@@ -222,7 +249,7 @@ def main() -> None:
               "balanced": args.balanced,
               "history": history, "untrained_held_out": before, "cloned_held_out": after,
               "log": log, "dagger": {"rounds": rounds, "episodes": args.dagger_episodes,
-                                     "epochs": args.dagger_epochs}}
+                                     "epochs": args.dagger_epochs, "lr": args.dagger_lr}}
     # written beside OUT and published whole (as rl fork does): an interrupted clone leaves no
     # OUT that looks like a run
     tmp = args.out.with_name(f".{args.out.name}{PARTIAL}")

@@ -228,15 +228,16 @@ def test_every_worker_starts_with_ctrl_c_blocked(tmp_path: Path) -> None:
 
 
 _CTRL_C_MID_START = """
-import os, signal, threading, time
+import os, signal, threading
 from multiprocessing import util
 from sc2data.rl.vector import BuildMarinesVecEnv, GameConfig
 spawn = util.spawnv_passfds
 def spawn_then_ctrl_c(path, args, passfds):
     pid = spawn(path, args, passfds)
     if any("spawn_main" in str(a) for a in args):  # a worker, its start-up data not yet sent
-        threading.Thread(target=os.kill, args=(os.getpid(), signal.SIGINT)).start()
-        time.sleep(0.2)  # the other thread's Ctrl-C lands here, before the data is written
+        sender = threading.Thread(target=os.kill, args=(os.getpid(), signal.SIGINT))
+        sender.start()
+        sender.join()  # the other thread's Ctrl-C is sent here, before the data is written
     return pid
 util.spawnv_passfds = spawn_then_ctrl_c
 if __name__ == "__main__":

@@ -168,12 +168,16 @@ def test_a_hung_task_is_cancelled_and_run_again(ray_instance: Any, reference: Pa
                                                 tmp_path: Path) -> None:
     fault = Faulty(episode=1, fault="hang", marker=str(tmp_path / "hung"))
     out = tmp_path / "data"
-    _, report = rollout_on_ray(CONFIG, out, RayOptions(timeout_s=4), progress=False,
+    _, report = rollout_on_ray(CONFIG, out, RayOptions(timeout_s=10), progress=False,
                                agent_factory=fault)
     assert fault.fired() == 1
-    assert list(report.retried) == ["shard-00001.h5"]
-    first, second = report.retried["shard-00001.h5"]
-    assert "hung: no progress for 4 s, cancelled" in first and second.endswith(": done")
+    tries = report.retried["shard-00001.h5"]
+    assert "hung: no progress for 10 s, cancelled" in tries[0] and tries[-1].endswith(": done")
+    # On a loaded machine a healthy attempt can also go 10 s without progress: it is cancelled
+    # and run again like the hung one, and every retried task still ends done.
+    for key, attempts in report.retried.items():
+        assert all("no progress for 10 s, cancelled" in a for a in attempts[:-1]), (key, attempts)
+        assert attempts[-1].endswith(": done"), (key, attempts)
     assert_same_data(out, reference)
 
 

@@ -195,11 +195,15 @@ def test_kill_9_leaves_no_shared_memory_and_no_worker(tmp_path: Path) -> None:
 
 
 def _run_script(tmp_path: Path, text: str) -> subprocess.CompletedProcess[str]:
-    """``text`` run as a script in a fresh interpreter (no resource tracker yet)."""
+    """``text`` run as a script in a fresh interpreter (no resource tracker yet), with
+    Ctrl-C's default disposition: an ignored SIGINT survives exec, and the pytest worker running
+    this may have been left ignoring it by an earlier test (the script then saw no Ctrl-C and
+    printed nothing, under ``-n 2`` and only in some orders)."""
     script = tmp_path / "script.py"
     script.write_text(text)
     return subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
-                          timeout=120, cwd=Path(__file__).parents[2])
+                          timeout=120, cwd=Path(__file__).parents[2],
+                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
 
 
 _MASKS = """

@@ -182,8 +182,7 @@ def curve_scores(curve: tuple[np.ndarray, np.ndarray, np.ndarray], games: int,
     """A run's score at each number of decisions in ``at``: over its ``games`` games, the mean
     of each game's marines over its last ``window`` training episodes ended by then (NaN until
     every game has ended one)."""
-    ends, marines, played = curve
-    per_game = [(ends[played == g], marines[played == g]) for g in range(games)]
+    per_game = _by_game(curve, games)
     out = np.full(len(at), np.nan)
     for i, x in enumerate(at):
         means = []
@@ -201,9 +200,15 @@ def every_game_ended(curve: tuple[np.ndarray, np.ndarray, np.ndarray], games: in
                      ) -> float | None:
     """The decisions by which every one of the run's ``games`` games had ended a training
     episode (None: one never did)."""
-    ends, _, played = curve
-    firsts = [ends[played == g] for g in range(games)]
+    firsts = [e for e, _ in _by_game(curve, games)]
     return None if any(not len(f) for f in firsts) else max(float(f[0]) for f in firsts)
+
+
+def _by_game(curve: tuple[np.ndarray, np.ndarray, np.ndarray], games: int
+             ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Each game's episodes of a curve: (decisions when each ended, marines), in order."""
+    ends, marines, played = curve
+    return [(ends[played == g], marines[played == g]) for g in range(games)]
 
 
 # -- runs -------------------------------------------------------------------------------------

@@ -13,7 +13,8 @@ table gives the median of each case and the CPU seconds (this process and its ch
         --case old:paper:narration:envs=1 --case new:paper:narration:envs=16,obs_size=32
 
 A case is ``CODE:SPACE:REWARD[:key=value,...]`` (values parsed as Python literals where they can
-be: ``envs=16,obs=stored,processes=0``).
+be: ``envs=16,obs=stored,processes=0``). A key in capitals is an environment variable of the
+measurement's process instead (``OMP_WAIT_POLICY=PASSIVE``), set before torch loads.
 """
 
 from __future__ import annotations
@@ -64,7 +65,10 @@ def parse_case(text: str) -> tuple[str, str, str, dict[str, object]]:
 
 
 def measure(code: Path, settings: dict[str, object]) -> dict[str, object]:
-    env = {**os.environ, "PYTHONPATH": str(code)}
+    """One measurement in a fresh process; settings keyed in capitals go to its environment."""
+    variables = {k: str(v) for k, v in settings.items() if k.isupper()}
+    settings = {k: v for k, v in settings.items() if not k.isupper()}
+    env = {**os.environ, **variables, "PYTHONPATH": str(code)}
     out = subprocess.run([sys.executable, "-c", CHILD, str(code), json.dumps(settings)],
                          capture_output=True, text=True, env=env, check=False)
     if out.returncode:

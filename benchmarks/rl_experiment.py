@@ -1,13 +1,14 @@
 """The narration-guided RL experiment: action spaces × rewards × seeds, one step budget per space.
 
 Each run is ``sc2data rl train`` (its defaults: 16 games in worker processes, the learner on
-every core, so one job at a time fills the machine; ``--jobs`` runs several), then ``sc2data rl
-evaluate`` on seeded episodes training never used (both start sides, sampled and argmax); the
-reference agents are played once on the same episodes (``rl baselines``) and every action
-space's runs are compared with ``rl compare`` (IQM, stratified-bootstrap CIs, probability of
-improvement), into ``OUT/<space>-compare/``. Everything is resumable: rerunning the same
-command resumes unfinished training runs
-(``rl train`` resumes itself) and skips evaluations already written for the trained step count.
+every core, so one job at a time fills the machine; ``--jobs J`` runs J side by side, each
+learner on its share of the cores: ``--threads`` cores // J unless ``--train-args`` sets it),
+then ``sc2data rl evaluate`` on seeded episodes training never used (both start sides,
+sampled and argmax); the reference agents are played once on the same episodes (``rl
+baselines``) and every action space's runs are compared with ``rl compare`` (IQM,
+stratified-bootstrap CIs, probability of improvement), into ``OUT/<space>-compare/``.
+Everything is resumable: rerunning the same command resumes unfinished training runs (``rl
+train`` resumes itself) and skips evaluations already written for the trained step count.
 Narration runs wait until the MEM run (``--mem``) has finished training. Prints and writes
 ``OUT/summary.md`` (the table of BENCHMARKS.md) and one learning-curve PNG per action space.
 
@@ -23,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import shlex
 import subprocess
@@ -82,7 +84,8 @@ def one_run(out: Path, space: str, reward: str, seed: int, steps: int, a: argpar
     times_file = out / space / f"{name}.times.json"
     times: dict[str, float] = _read(times_file) or {}
     args = ["rl", "train", "--action-space", space, "--reward", reward, "--steps", str(steps),
-            "--seed", str(seed), "--out", str(run), "--no-progress", *shlex.split(a.train_args)]
+            "--seed", str(seed), "--out", str(run), "--no-progress",
+            *shlex.split(train_args(a.train_args, a.jobs))]
     if reward == "narration":
         with mem_lock:
             wait_for_mem(a.mem)
@@ -101,6 +104,16 @@ def one_run(out: Path, space: str, reward: str, seed: int, steps: int, a: argpar
         times["eval_s"] = sh(["rl", "evaluate", str(run), "--episodes", str(episodes),
                               "--no-progress"], log)
         times_file.write_text(json.dumps(times))
+
+
+def train_args(given: str, jobs: int) -> str:
+    """``--train-args`` with ``--threads`` added for runs side by side: each learner gets cores //
+    jobs threads. On 2 cores two learners of 2 threads each took 1.6-1.9x the wall time of one
+    thread each, their OpenMP threads spinning for a core the other holds (BENCHMARKS.md, "Runs
+    side by side")."""
+    if jobs <= 1 or any(arg.split("=", 1)[0] == "--threads" for arg in shlex.split(given)):
+        return given
+    return f"{given} --threads {max(1, (os.cpu_count() or 1) // jobs)}".strip()
 
 
 def macro_sites(train_args: str) -> str:

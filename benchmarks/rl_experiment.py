@@ -113,7 +113,8 @@ def train_args(given: str, jobs: int) -> str:
     side by side")."""
     if jobs <= 1 or any(arg.split("=", 1)[0] == "--threads" for arg in shlex.split(given)):
         return given
-    return f"{given} --threads {max(1, (os.cpu_count() or 1) // jobs)}".strip()
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return f"{given} --threads {max(1, (cores or 1) // jobs)}".strip()
 
 
 def macro_sites(train_args: str) -> str:

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import platform
 import shlex
 import subprocess
@@ -113,8 +112,9 @@ def train_args(given: str, jobs: int) -> str:
     side by side")."""
     if jobs <= 1 or any(arg.split("=", 1)[0] == "--threads" for arg in shlex.split(given)):
         return given
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return f"{given} --threads {max(1, (cores or 1) // jobs)}".strip()
+    from sc2data.rl.train import cores  # the cores `rl train` itself counts
+
+    return f"{given} --threads {max(1, cores() // jobs)}".strip()
 
 
 def macro_sites(train_args: str) -> str:

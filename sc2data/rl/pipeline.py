@@ -4,9 +4,12 @@ MaskablePPO collects a rollout in lockstep: the policy acts for every game, then
 steps while the learner waits, then the reward is scored for every game while the games wait.
 :class:`PipelinedPPO` splits the games into ``groups`` contiguous parts (as the worker processes
 hold them, :func:`~sc2data.rl.vector.spans`) and takes them in turn: while group 0's games step
-in their worker, the learner scores group 1's reward and acts for it, and so on — Sample
-Factory's double-buffered sampling. The learner's work and the games' then overlap instead of
-adding up (BENCHMARKS.md, "Pipelined rollouts").
+in their worker, the learner waits for group 1's and acts for it, and so on — Sample Factory's
+double-buffered sampling. The reward of every group is scored once a vector step, after the
+last group's next decision is sent (one MEM call of all the games' stacks, the frames copied
+aside: :meth:`~sc2data.rl.vector.BuildMarinesVecEnv.score_waited`), while the groups step
+again. The learner's work and the games' then overlap instead of adding up (BENCHMARKS.md,
+"Pipelined rollouts" and "Fewer copies in the update, one MEM call a vector step").
 
 The data are what lockstep collects: every decision of a rollout is taken by that rollout's
 policy, a rollout has the same decisions, and the buffer, the callback and the update see one
@@ -110,18 +113,18 @@ class PipelinedPPO(MaskablePPO):
             stepped, taken = [], taking
             taking = []
             for lo, hi in parts:
-                part_obs, part_rewards, part_dones, part_infos = env.step_wait_rows(lo, hi)
+                part_obs, _ = env.step_wait_rows_unscored(lo, hi)
                 part_masks = env.action_masks(lo, hi)
-                stepped.append((part_obs, part_rewards, part_dones, part_infos, part_masks))
+                stepped.append((part_obs, part_masks))
                 if not last:  # the group's next decision, taken while the next group steps
                     taking.append(self._act(env, lo, hi, part_obs, part_masks))
+            # Every group's reward in one call (one MEM call of all the games' stacks), while
+            # the groups step again: rewards are not read before the buffer takes them.
+            rewards, dones, infos = env.score_waited()
             actions = np.concatenate([a for a, _, _ in taken])
             values = th.cat([v for _, v, _ in taken])
             log_probs = th.cat([p for _, _, p in taken])
             new_obs = {k: np.concatenate([s[0][k] for s in stepped]) for k in obs}
-            rewards = np.concatenate([s[1] for s in stepped])
-            dones = np.concatenate([s[2] for s in stepped])
-            infos = [i for s in stepped for i in s[3]]
             self.num_timesteps += env.num_envs
             callback.update_locals(locals())
             if not callback.on_step():
@@ -134,7 +137,7 @@ class PipelinedPPO(MaskablePPO):
                                action_masks=masks)
             self._last_obs = obs = new_obs  # type: ignore[assignment]
             self._last_episode_starts = dones
-            masks = np.concatenate([s[4] for s in stepped])
+            masks = np.concatenate([s[1] for s in stepped])
         with th.no_grad():
             values = self.policy.predict_values(obs_as_tensor(obs, self.device))  # type: ignore[arg-type]
         rollout_buffer.compute_returns_and_advantage(last_values=values, dones=dones)

@@ -12,9 +12,10 @@ message and nothing else crosses a pipe (EnvPool, Sample Factory and PufferLib w
 The reward is computed here, in the learner's process, once per vector step for all games
 (:mod:`sc2data.rl.batched`): the narration reward scores every game's new two-frame stacks in one
 MEM call, from the frames the workers already extracted; one MEM is loaded, not one per worker.
-A contiguous part of the games can be stepped and waited for on its own, its reward scored
-for those games (``step_async_rows``), so that the learner works for one part while another
-steps (:mod:`sc2data.rl.pipeline`).
+A contiguous part of the games can be stepped and waited for on its own (``step_async_rows``),
+its reward scored at once or, with the parts waited for after it, in one call once they step
+again (``score_waited``), so that the learner works for one part while another steps
+(:mod:`sc2data.rl.pipeline`).
 
 Semantics are those of SB3's ``DummyVecEnv`` over the same games: game ``i`` is reset with
 ``seed + i`` after :meth:`seed` (then continues its own stream), a game that ends is reset at
@@ -264,6 +265,33 @@ def default_processes(n: int) -> int:
     return max(1, min(n, cores))
 
 
+def _stacked(parts: list[np.ndarray]) -> np.ndarray:
+    """Parts' frames ``(games, slots, …)`` one after another, the slots of the part with the
+    most (the others' extra slots zero: no decision of theirs reads them)."""
+    if len(parts) == 1:
+        return parts[0]
+    slots = max(p.shape[1] for p in parts)
+    out = np.zeros((sum(len(p) for p in parts), slots, *parts[0].shape[2:]), parts[0].dtype)
+    row = 0
+    for p in parts:
+        out[row:row + len(p), :p.shape[1]] = p
+        row += len(p)
+    return out
+
+
+@dataclass
+class _Waited:
+    """A part of the games waited for and not yet scored: what its reward and infos need."""
+
+    lo: int
+    hi: int
+    game: np.ndarray
+    done: np.ndarray
+    frames: dict[str, np.ndarray] = field(default_factory=dict)
+    n_frames: np.ndarray | None = None
+    infos: list[dict[str, Any]] = field(default_factory=list)
+
+
 class BuildMarinesVecEnv(VecEnv):
     """``n`` BuildMarines games as one SB3 ``VecEnv`` (see the module docstring).
 
@@ -298,6 +326,8 @@ class BuildMarinesVecEnv(VecEnv):
         self._slices = spans(n, self.processes)
         self._inflight: list[tuple[int, int, list[int]]] = []
         """Parts sent to step and not yet waited for: their rows and the workers stepping them."""
+        self._waited: list[_Waited] = []
+        """Parts waited for and not yet scored (:meth:`step_wait_rows_unscored`)."""
         self._local: GameSlice | None = None
         self.arena = Arena.private(fields) if self.processes == 0 else Arena.create(fields)
         try:
@@ -394,6 +424,8 @@ class BuildMarinesVecEnv(VecEnv):
     def reset(self) -> dict[str, np.ndarray]:
         if self._inflight:  # their replies would be read as the reset's
             raise RuntimeError("reset while games are stepping: wait for them first")
+        if self._waited:
+            raise RuntimeError("reset while games wait to be scored: score_waited() first")
         self._send("reset", self._per_worker(self._seeds))
         if self._local is None:
             self._collect()
@@ -422,34 +454,67 @@ class BuildMarinesVecEnv(VecEnv):
                        ) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, list[dict]]:
         """Wait for games ``lo`` to ``hi`` (the oldest part sent) and give what ``step_wait``
         gives, for those games."""
+        if self._waited:
+            raise RuntimeError("games waited for and not yet scored: score_waited() first")
+        obs, done = self.step_wait_rows_unscored(lo, hi)
+        reward, _, infos = self.score_waited()
+        return obs, reward, done, infos
+
+    def step_wait_rows_unscored(self, lo: int, hi: int) -> tuple[dict[str, np.ndarray],
+                                                                 np.ndarray]:
+        """Wait for games ``lo`` to ``hi`` (the oldest part sent) and give their observations
+        and episode ends; their reward waits for :meth:`score_waited`, which scores every part
+        waited for since in one shaping call (one MEM call for the narration reward: two calls
+        of 8 stacks cost 1.4× one of 16, BENCHMARKS.md). Their frames are copied meanwhile,
+        so the part may step again before it is scored."""
         if not self._inflight or self._inflight[0][:2] != (lo, hi):
             raise RuntimeError(f"games {lo}-{hi} waited for out of the order they were sent in")
+        if self._waited and self._waited[-1].hi != lo:
+            raise RuntimeError(f"games {lo}-{hi} waited for before games "
+                               f"{self._waited[-1].hi}-{lo} were scored")
         workers = self._inflight.pop(0)[2]
         if self._local is not None:
             self._local.step(lo, hi)
         else:
             self._collect(workers)
         a = self.a
-        game = a["game_reward"][lo:hi].copy()
-        done = a["done"][lo:hi].copy()
-        extra = np.zeros(hi - lo)
-        extra_info: list[dict[str, Any]] = [{} for _ in range(lo, hi)]
+        part = _Waited(lo, hi, game=a["game_reward"][lo:hi].copy(), done=a["done"][lo:hi].copy())
         if self.shaping is not None:
-            frames = {k: v[lo:hi] for k, v in self.frame_arrays.items()}
-            extra, extra_info = self.shaping(frames, a["n_frames"][lo:hi], done, first=lo)
-            extra = extra + (self.game_weight - 1.0) * game  # a control may take the game's away
-        infos: list[dict[str, Any]] = []
+            part.n_frames = a["n_frames"][lo:hi].copy()
+            used = int(part.n_frames.max())  # the slots a decision filled, not all of them
+            part.frames = {k: v[lo:hi, :used].copy() for k, v in self.frame_arrays.items()}
         for j, i in enumerate(range(lo, hi)):
-            info = {"game_reward": float(game[j]), "shaping": float(extra[j]),
-                    "env_steps": int(a["env_steps"][i]), "invalid": bool(a["invalid"][i]),
-                    "game_loop": int(a["game_loop"][i]), "marines": int(a["marines"][i]),
-                    **extra_info[j]}
-            if done[j]:
+            info = {"game_reward": float(part.game[j]), "env_steps": int(a["env_steps"][i]),
+                    "invalid": bool(a["invalid"][i]), "game_loop": int(a["game_loop"][i]),
+                    "marines": int(a["marines"][i])}
+            if part.done[j]:
                 info["terminal_observation"] = {k: a[f"final/{k}"][i].copy()
                                                 for k in self.obs_keys}
-            infos.append(info)
+            part.infos.append(info)
+        self._waited.append(part)
+        return self._obs(lo, hi), part.done.copy()
+
+    def score_waited(self) -> tuple[np.ndarray, np.ndarray, list[dict[str, Any]]]:
+        """The rewards, episode ends and infos of the games waited for since the last call
+        (:meth:`step_wait_rows_unscored`), in order: one shaping call for them all."""
+        parts, self._waited = self._waited, []
+        if not parts:
+            return np.zeros(0, np.float32), np.zeros(0, bool), []
+        game = np.concatenate([p.game for p in parts])
+        done = np.concatenate([p.done for p in parts])
+        infos = [i for p in parts for i in p.infos]
+        extra = np.zeros(len(game))
+        extra_info: list[dict[str, Any]] = [{} for _ in infos]
+        if self.shaping is not None:
+            n_frames = np.concatenate([p.n_frames for p in parts])
+            frames = {k: _stacked([p.frames[k] for p in parts]) for k in parts[0].frames}
+            extra, extra_info = self.shaping(frames, n_frames, done, first=parts[0].lo)
+            extra = extra + (self.game_weight - 1.0) * game  # a control may take the game's away
+        for info, e, more in zip(infos, extra, extra_info):
+            info["shaping"] = float(e)
+            info.update(more)
         reward = (game + extra) * self.reward_scale
-        return self._obs(lo, hi), reward.astype(np.float32), done, infos
+        return reward.astype(np.float32), done, infos
 
     def _obs(self, lo: int = 0, hi: int | None = None) -> dict[str, np.ndarray]:
         # Copies: SB3 keeps the last observation while the next step overwrites the arrays.

@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from sc2data.rl.envs import PAPER_FUNCTIONS
-from sc2data.rl.spatial import POINT_FUNCTIONS, PaperPolicy, PointDistribution, sample
+from sc2data.rl.spatial import POINT_FUNCTIONS, PaperPolicy, PointDistribution, _pointwise, sample
 from sc2data.rl.train import RLConfig, make_vec_env, new_model, train
 
 CONTROL = dict(action_space="paper", reward="zero", steps=2048, envs=8, rollout=64,
@@ -105,6 +105,19 @@ def test_a_cell_shares_its_probability_evenly_among_its_pixels() -> None:
     for _ in range(10):
         a = d.get_actions()[0]
         assert 0 <= int(a[1]) < 64 and 0 <= int(a[2]) < 64
+
+
+def test_the_pointwise_product_is_a_1x1_convolution_and_its_gradient() -> None:
+    torch.manual_seed(0)
+    layer = torch.nn.Linear(13, 5)
+    x = torch.rand(3, 13, 8, 8)
+    y = _pointwise(layer, x)
+    ref = torch.nn.functional.conv2d(x, layer.weight[:, :, None, None], layer.bias)
+    assert y.shape == (3, 5, 8, 8) and torch.allclose(y, ref, atol=1e-6)
+    g = torch.rand_like(y)
+    got = torch.autograd.grad(y, (layer.weight, layer.bias), g)
+    want = torch.autograd.grad(ref, (layer.weight, layer.bias), g)
+    assert all(torch.allclose(a, b, atol=1e-5) for a, b in zip(got, want))
 
 
 def test_point_entropy_is_the_joint_entropy_by_hand() -> None:

@@ -184,3 +184,75 @@ def test_the_groups_come_from_the_run_s_settings_not_the_model_file(tmp_path: Pa
     finally:
         vec.close()
     assert PipelinedPPO.load(tmp_path / "model.zip", device="cpu").groups == 1
+
+
+@pytest.mark.parametrize("space", ["paper", "macro"])
+def test_parts_scored_together_pay_what_each_part_scored_alone_pays(space: str) -> None:
+    """Parts waited for unscored, each sent to step again before the parts are scored in one
+    call (as a pipelined rollout does, their frames overwritten meanwhile), get the rewards,
+    ends and infos of parts scored as they are waited for (in the macro space, parts whose
+    decisions filled different numbers of frames); mixing the two ways, or resetting with a
+    part unscored, is an error."""
+    narration = Narration(("one", "two", "three"), "test")
+    n, parts = 5, spans(5, 2)
+    alone, together = (BuildMarinesVecEnv(
+        GameConfig(space, game_loops=8 * (12 if space == "paper" else 60)), n, processes=p,
+        shaping=BatchedNarration(_MineralScorer(), narration, bonus=0.5, patience=3))  # type: ignore[arg-type]
+        for p in (0, 2))
+    rng = np.random.default_rng(1)
+
+    def send(lo: int, hi: int) -> None:
+        masks = alone.action_masks(lo, hi)
+        assert (masks == together.action_masks(lo, hi)).all()
+        if space == "macro":
+            a = np.array([rng.choice(np.flatnonzero(m)) for m in masks])
+        else:  # a function the mask allows, at a random point
+            f = [rng.choice(np.flatnonzero(m[:10])) for m in masks]
+            a = np.column_stack([f, rng.integers(0, 64, size=(hi - lo, 2))])
+        alone.step_async_rows(lo, hi, a)
+        together.step_async_rows(lo, hi, a)
+
+    try:
+        for v in (alone, together):
+            v.seed(4)
+            v.reset()
+        for lo, hi in parts:
+            send(lo, hi)
+        paid = ends = uneven = 0
+        for t in range(30):
+            got, waits = [], []
+            for lo, hi in parts:
+                got.append(alone.step_wait_rows(lo, hi))
+                waits.append(together.step_wait_rows_unscored(lo, hi))
+                send(lo, hi)  # the part steps on before it is scored
+            if t == 0:
+                with pytest.raises(RuntimeError, match="score_waited"):
+                    together.step_wait_rows(*parts[0])
+            rewards, dones, infos = together.score_waited()
+            assert (rewards == np.concatenate([g[1] for g in got])).all(), t
+            assert (dones == np.concatenate([g[2] for g in got])).all()
+            for (obs, done), g in zip(waits, got):
+                assert (done == g[2]).all() and all((obs[k] == g[0][k]).all() for k in obs)
+            flat = [i for g in got for i in g[3]]
+            for a, b in zip(infos, flat, strict=True):
+                assert a.keys() == b.keys()
+                assert all(a[k] == b[k] for k in a if k != "terminal_observation")
+                if "terminal_observation" in a:
+                    assert all((a["terminal_observation"][k] == b["terminal_observation"][k])
+                               .all() for k in a["terminal_observation"])
+            paid += int((rewards > 0).sum())
+            ends += int(dones.sum())
+            longest = {max(i["env_steps"] for i in g[3]) for g in got}
+            uneven += len(longest) > 1  # one part's decisions filled more frames
+        assert paid > 5 and ends >= n  # the narration paid and every game ended on the way
+        assert uneven or space == "paper"
+        assert together.score_waited()[0].shape == (0,)
+        for lo, hi in parts:
+            alone.step_wait_rows(lo, hi)
+            together.step_wait_rows_unscored(lo, hi)
+        with pytest.raises(RuntimeError, match="scored"):
+            together.reset()
+        assert len(together.score_waited()[0]) == n
+    finally:
+        alone.close()
+        together.close()

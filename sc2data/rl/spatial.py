@@ -210,10 +210,9 @@ class PaperPolicy(MaskableMultiInputActorCriticPolicy):
 
 def _pointwise(layer: nn.Linear, x: torch.Tensor) -> torch.Tensor:
     """A 1×1 convolution by ``layer`` of ``x`` (B, C, H, W) → (B, out, H, W), as one batched
-    product with the weight broadcast over the batch: ``matmul`` of the weight and ``x`` copied
-    ``x`` into (B·H·W, C) first, and the fine map's product, its copy and its backward took 1.4×
-    PPO's whole update against this (BENCHMARKS.md, "Fewer copies in the update, one MEM call
-    a vector step")."""
+    product with the weight broadcast over the batch. ``matmul`` of the weight and ``x`` copied
+    ``x`` into (B·H·W, C) first, forward and backward: PPO's whole update took 1.37× as long
+    (BENCHMARKS.md, "Fewer copies in the update, one MEM call a vector step")."""
     b, c, hh, ww = x.shape
     out = layer.weight.shape[0]
     y = torch.baddbmm(layer.bias[None, :, None].expand(b, out, hh * ww),

@@ -456,7 +456,7 @@ class BuildMarinesVecEnv(VecEnv):
         gives, for those games."""
         if self._waited:
             raise RuntimeError("games waited for and not yet scored: score_waited() first")
-        obs, done = self.step_wait_rows_unscored(lo, hi)
+        obs, done = self._wait_rows(lo, hi, keep_frames=False)  # scored before they step again
         reward, _, infos = self.score_waited()
         return obs, reward, done, infos
 
@@ -467,6 +467,12 @@ class BuildMarinesVecEnv(VecEnv):
         waited for since in one shaping call (one MEM call for the narration reward: two calls
         of 8 stacks cost 1.4× one of 16, BENCHMARKS.md). Their frames are copied meanwhile,
         so the part may step again before it is scored."""
+        return self._wait_rows(lo, hi, keep_frames=True)
+
+    def _wait_rows(self, lo: int, hi: int, keep_frames: bool
+                   ) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        """Wait for games ``lo`` to ``hi`` and set them aside for :meth:`score_waited`, their
+        frames copied (``keep_frames``) or as views of the arrays the next step overwrites."""
         if not self._inflight or self._inflight[0][:2] != (lo, hi):
             raise RuntimeError(f"games {lo}-{hi} waited for out of the order they were sent in")
         if self._waited and self._waited[-1].hi != lo:
@@ -482,7 +488,8 @@ class BuildMarinesVecEnv(VecEnv):
         if self.shaping is not None:
             part.n_frames = a["n_frames"][lo:hi].copy()
             used = int(part.n_frames.max())  # the slots a decision filled, not all of them
-            part.frames = {k: v[lo:hi, :used].copy() for k, v in self.frame_arrays.items()}
+            part.frames = {k: v[lo:hi, :used].copy() if keep_frames else v[lo:hi, :used]
+                           for k, v in self.frame_arrays.items()}
         for j, i in enumerate(range(lo, hi)):
             info = {"game_reward": float(part.game[j]), "env_steps": int(a["env_steps"][i]),
                     "invalid": bool(a["invalid"][i]), "game_loop": int(a["game_loop"][i]),

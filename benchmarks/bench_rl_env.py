@@ -55,6 +55,9 @@ def main() -> None:
     p.add_argument("--decisions", type=int, default=16000, help="decisions per measurement")
     p.add_argument("--repeats", type=int, default=3)
     args = p.parse_args()
+    for case in args.case:
+        if len(case.split(":")) != 2 or not all(case.split(":")):
+            p.error(f"--case {case!r}: expected SPACE:REWARD, e.g. macro:narration")
     root = Path(__file__).resolve().parent.parent
     results: dict[str, list[dict[str, float]]] = {c: [] for c in args.case}
     for r in range(args.repeats):

@@ -131,8 +131,8 @@ class RLConfig:
     # sc2data.rl.pipeline: the same decisions as lockstep, sampled a group at a time, so the
     # same seed gives another run for another number of groups (not for other --processes).
     processes: int | None = None
-    """Worker processes stepping the games (0: in this process) [default: one per core; none
-    for one env]."""
+    """Worker processes stepping the games (0: in this process) [default: one per core, one
+    fewer with the narration reward, at least one; none for one env]."""
     # Changes nothing but speed, so it may differ on resume.
     device: str = "auto"
     """Policy and MEM on cpu, cuda or auto (cuda where a GPU is present)."""

@@ -353,3 +353,22 @@ def test_reward_scale_scales_what_the_learner_gets_and_nothing_else() -> None:
         for env in envs:
             env.close()
     assert paid > 0
+
+
+@pytest.mark.parametrize("reward, cores, workers", [
+    ("narration", 2, 1), ("sparse", 2, 2), ("narration", 1, 1), ("rules", 4, 4),
+    ("narration", 4, 3)])
+def test_a_mem_learner_keeps_a_core_of_its_own(reward: str, cores: int, workers: int,
+                                               mem_run: Path,
+                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """By default one worker process per core, one fewer where a MEM scores the reward in the
+    learner's process, never none."""
+    monkeypatch.setattr(os, "sched_getaffinity", lambda _: set(range(cores)), raising=False)
+    cfg = RLConfig(out="unused", action_space="paper", reward=reward, envs=8,
+                   mem=str(mem_run) if reward == "narration" else None)
+    narration, scorer = check_config(cfg)
+    vec = make_vec_env(cfg, scorer, narration)
+    try:
+        assert vec.processes == workers
+    finally:
+        vec.close()

@@ -3,7 +3,8 @@ the loop a worker process runs (:mod:`sc2data.rl.vector` is the learner's side).
 
 A worker process imports this module and not :mod:`sc2data.rl.vector`, whose ``VecEnv`` base
 brings stable-baselines3 and torch: a worker steps the simulator and needs neither, and not
-loading them is most of its start-up (BENCHMARKS.md, "A worker without torch").
+loading them is most of its start-up (BENCHMARKS.md, "A worker without torch, a core for the
+learner").
 """
 
 from __future__ import annotations

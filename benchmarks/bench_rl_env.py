@@ -1,9 +1,11 @@
-"""The RL vector env's own pace, no learner: the ceiling any training run here works under.
+"""The RL vector env's own pace, no learner: what stepping the games and scoring their reward cost.
 
-``sc2data rl train``'s vector env (its defaults: 16 games, one worker process per core, the
-run's reward batched in this process — for the narration reward one MEM call a vector step over
-every game's new two-frame stacks) stepped in lockstep with uniformly random allowed actions
-(a masked macro; a masked paper function at a random screen point): no policy, no PPO update.
+``sc2data rl train``'s vector env (its defaults: 16 games, worker processes as a run starts them
+— one per core, one fewer with the narration reward — the run's reward batched in this process,
+for the narration reward one MEM call a vector step over every game's new two-frame stacks)
+stepped in lockstep with uniformly random allowed actions (a masked macro; a masked paper
+function at a random screen point): no policy, no PPO update. Lockstep steps the games, then
+scores them; a pipelined training run overlaps the two and may run faster than this.
 Each case is a fresh process; the table gives medians over ``--repeats``.
 
     .venv/bin/python benchmarks/bench_rl_env.py --mem demo-out/run --decisions 16000 \\

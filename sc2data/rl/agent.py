@@ -66,7 +66,7 @@ class PolicyAgent(base_agent.BaseAgent):
 
     def __init__(self, model: Any, cfg: Any, seed: int) -> None:
         super().__init__()
-        from sc2data.rl.obs import MacroClock, Observer
+        from sc2data.rl.obs import MacroClock, Observer, history_actions
 
         self.model = model
         self.cfg = cfg
@@ -74,8 +74,9 @@ class PolicyAgent(base_agent.BaseAgent):
         self.observer = Observer(cfg.obs_config())
         self._macro: Iterator[actions.FunctionCall] | None = None
         self._sent = 0
-        self.clock = MacroClock()
-        """When each macro last acted, as the env's (the observation's ``history``)."""
+        self.clock = MacroClock(history_actions(cfg.action_space))
+        """When each macro (or paper function) last acted, as the env's (the observation's
+        ``history``)."""
         self.reset()
 
     def reset(self) -> None:
@@ -98,6 +99,7 @@ class PolicyAgent(base_agent.BaseAgent):
         view = ScreenView(obs)
         if self.cfg.action_space == "paper":
             f, x, y = (int(a) for a in self._decide(obs, self._paper_mask(view)).reshape(3))
+            self.clock.acted(f, game_loop(obs.observation))
             return paper_call(f, x, y)
         self.expander.view = view
         for _ in range(2):  # the running macro's next call, or a new decision on this view

@@ -49,8 +49,8 @@ Observations (:mod:`sc2data.rl.obs`): ``obs="stored"`` (the default here) is a `
 ``Box`` per key of the schema (``Schema.named(layers)``, the paper's 13 screen + 7 minimap
 layers by default) in the stored dtypes, plus its non-spatial vectors (``player``,
 ``score_cumulative``, ``game_loop``) — exactly what ``Schema.extract`` stores for a frame;
-``obs="compact"`` the one-hot encoding made for a small CNN (with ``history``, in the macro
-space, also the game time since each macro last acted: the env keeps the episode's
+``obs="compact"`` the one-hot encoding made for a small CNN (with ``history`` also the game
+time since each macro — paper space: each function — last acted: the env keeps the episode's
 :class:`~sc2data.rl.obs.MacroClock`). The raw pysc2 observations of the
 last decision are kept in :attr:`BuildMarinesGym.frames` for the reward wrappers (never put in
 ``info``), and on the simulator what happened in each of its pysc2 steps in
@@ -86,6 +86,7 @@ from sc2data.rl.obs import (
     ObsConfig,
     Observer,
     game_loop,
+    history_actions,
 )
 
 ACTION_SPACES: tuple[str, ...] = ("macro", "paper")
@@ -166,10 +167,10 @@ class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
         self._view: ScreenView | None = None
         self.sites = sites
         self._expander = ReducedRandomAgent(0, sites=sites)
-        self._clock = MacroClock()
-        if self.observer.cfg.history and action_space != "macro":
-            raise Sc2DataError("--history is for the macro space (the time since each macro "
-                               "last acted)")
+        if self.observer.cfg.history and self.observer.cfg.action_space != action_space:
+            raise ValueError(f"a {action_space}-space env with history needs an ObsConfig of "
+                             f"that space, not {self.observer.cfg.action_space!r}")
+        self._clock = MacroClock(history_actions(action_space))
         self.frames: list[Any] = []
         """pysc2 observations of the last decision: the one before it, then one per pysc2 step."""
         self.events: list[tuple[Any, ...]] = []
@@ -209,8 +210,11 @@ class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
         else:
             name = MACROS[int(action)]
         if invalid:
+            if self.kind == "paper":
+                self._clock.acted(PAPER_FUNCTIONS.index("no_op"), self._loop())
             reward += self._send(NO_OP)
         elif self.kind == "paper":
+            self._clock.acted(fn, self._loop())
             reward += self._send(paper_call(fn, x, y))
         else:
             reward += self._play_macro(name)
@@ -236,6 +240,13 @@ class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
         agent do)."""
         assert self._view is not None, "call reset() first"
         return self._view
+
+    @property
+    def timestep(self) -> Any:
+        """The latest pysc2 ``TimeStep`` (for a pysc2 agent that plays this env's paper space,
+        as ``benchmarks/clone_scripted.py`` has the scripted agent do)."""
+        assert self._ts is not None, "call reset() first"
+        return self._ts
 
     def close(self) -> None:
         if self._env is not None:

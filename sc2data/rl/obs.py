@@ -16,8 +16,9 @@
     at the same size. The camera is locked on BuildMarines and the screen shows the whole
     playable area, so it adds little; off by default.
   - ``vector``: float32, ``log1p`` of the ``player`` fields, the episode's elapsed fraction of
-    its 14,400 game loops, and which :data:`PAPER_FUNCTIONS` are available; with ``history``
-    (macro space), then per macro the game time since it last acted (:class:`MacroClock`).
+    its 14,400 game loops, and which :data:`PAPER_FUNCTIONS` are available; with ``history``,
+    then per macro (macro space) or per function (paper space) the game time since it last
+    acted (:class:`MacroClock`).
     pysc2 hands an agent its ``last_actions`` for the same reason: a feed-forward policy cannot
     otherwise tell that it sent a builder a moment ago (one that has not reached its site shows
     nowhere on the screen), and the macro-rules agent's own timers are what keep it from sending
@@ -88,7 +89,9 @@ class ObsConfig:
     minimap: bool = False
     """``compact``: add the minimap channels."""
     history: bool = False
-    """``compact``, macro space: the vector ends with :class:`MacroClock`'s features."""
+    """``compact``: the vector ends with :class:`MacroClock`'s features."""
+    action_space: str = "macro"
+    """With ``history``: whose actions the clock times (:func:`history_actions`)."""
 
     def check(self) -> None:
         if self.kind not in OBSERVATIONS:
@@ -137,7 +140,8 @@ class Observer:
         boxes = {"screen": spaces.Box(0, 255, (len(self.screen_channels), s, s), np.uint8)}
         if cfg.minimap:
             boxes["minimap"] = spaces.Box(0, 255, (len(self.minimap_channels), s, s), np.uint8)
-        n_vec = len(features.Player) + 1 + n_funcs + (len(MACROS) if cfg.history else 0)
+        self._n_history = len(history_actions(cfg.action_space)) if cfg.history else 0
+        n_vec = len(features.Player) + 1 + n_funcs + self._n_history
         boxes["vector"] = spaces.Box(0.0, 32.0, (n_vec,), np.float32)  # log1p(2**31) < 22
         self.space = spaces.Dict(boxes)
         self.layers = frozenset(
@@ -181,7 +185,7 @@ class Observer:
         if self.cfg.history:
             if clock is None:
                 raise ValueError("an observation with history needs the episode's MacroClock")
-            dest["vector"][-len(MACROS):] = clock.features(game_loop(obs))
+            dest["vector"][-self._n_history:] = clock.features(game_loop(obs))
         return dest
 
     # -- compact ---------------------------------------------------------------------------------
@@ -221,19 +225,30 @@ class Observer:
         out[n + 1:n + 1 + len(PAPER_FUNCTIONS)] = table[_paper_ids()]
 
 
-class MacroClock:
-    """When each macro last *acted* in an episode: sent its first call that is not a wait (the
-    ``no_op`` macro: its ``no_op``). A macro that gave up waiting for minerals or sent nothing
-    did not act; a forced wait (``merge_waits``) is no choice and not recorded.
+def history_actions(action_space: str) -> tuple[str, ...]:
+    """The actions ``history`` times in ``action_space``: the macros, or the paper space's
+    functions."""
+    return MACROS if action_space == "macro" else PAPER_FUNCTIONS
 
-    The features are ``log(1 + loops since) / log(1 + 14,400)`` per macro, in :data:`MACROS`
+
+class MacroClock:
+    """When each action last *acted* in an episode. Macro space (the default ``names``): a
+    macro acts when it sends its first call that is not a wait (the ``no_op`` macro: its
+    ``no_op``); one that gave up waiting for minerals or sent nothing did not act; a forced wait
+    (``merge_waits``) is no choice and not recorded. Paper space (``names`` the
+    :data:`PAPER_FUNCTIONS`): a function acts when its call is sent (:meth:`acted`); an
+    unavailable one is sent as ``no_op``, which then acts.
+
+    The features are ``log(1 + loops since) / log(1 + 14,400)`` per action, in ``names``
     order, 1 for one that has not acted this episode: fine over the first few hundred loops
     (a builder's walk, a marine's 400 loops of training) and bounded. The gymnasium env and the
     ``policy:RUN`` rollout agent keep one each, fed the same way.
     """
 
-    def __init__(self) -> None:
-        self.last = np.full(len(MACROS), -1, np.int64)
+    def __init__(self, names: tuple[str, ...] = MACROS) -> None:
+        self.names = names
+        """The actions it times, in feature order."""
+        self.last = np.full(len(names), -1, np.int64)
         self._running = -1  # the macro being played out that has not acted yet, or -1
 
     def reset(self) -> None:
@@ -242,19 +257,19 @@ class MacroClock:
 
     def start(self, name: str) -> None:
         """Macro ``name`` was chosen and is about to send its calls."""
-        self._running = MACROS.index(name)
+        self._running = self.names.index(name)
 
     def sent(self, call: actions.FunctionCall, game_loop: int) -> None:
         """The running macro sends ``call`` on the observation of ``game_loop``: it acts now
         unless the call is a wait (the ``no_op`` macro's own ``no_op`` is its act)."""
         i = self._running
-        if i >= 0 and (MACROS[i] == "no_op" or call.function != actions.FUNCTIONS.no_op.id):
+        if i >= 0 and (self.names[i] == "no_op" or call.function != actions.FUNCTIONS.no_op.id):
             self.acted(i, game_loop)
             self._running = -1
 
-    def acted(self, macro: int, game_loop: int) -> None:
-        """Macro ``macro`` (its index) sent a call on the observation of ``game_loop``."""
-        self.last[macro] = game_loop
+    def acted(self, action: int, game_loop: int) -> None:
+        """Action ``action`` (its index) sent a call on the observation of ``game_loop``."""
+        self.last[action] = game_loop
 
     def features(self, game_loop: int) -> np.ndarray:
         since = np.where(self.last < 0, GAME_LOOPS,

@@ -201,8 +201,9 @@ class RLConfig:
     # BENCHMARKS.md, "The macro space's ceiling": the scripted rules make 88.2 marines on random
     # sites and 119.2 on far ones.
     history: bool = False
-    """Macro space, compact observation: the policy also sees the game time since each macro
-    last acted (as pysc2's last_actions; else a builder on its way shows nowhere)."""
+    """Compact observation: the policy also sees the game time since each macro (paper space:
+    each function) last acted (as pysc2's last_actions; else a builder on its way shows
+    nowhere)."""
     # sc2data.rl.obs.MacroClock.
     init_policy: str | None = None
     """Start from this trained run's policy (its model.zip: the same action space, observation
@@ -247,7 +248,8 @@ class RLConfig:
         from sc2data.rl.obs import ObsConfig
 
         return ObsConfig(kind=self.obs, layers=self.layers, size=self.obs_size,
-                         minimap=self.minimap, history=self.history)
+                         minimap=self.minimap, history=self.history,
+                         action_space=self.action_space)
 
     def identity(self) -> dict[str, Any]:
         return {k: v for k, v in dataclasses.asdict(self).items() if k not in self.RESUMABLE}
@@ -296,9 +298,6 @@ def check_values(cfg: RLConfig) -> None:
         raise Sc2DataError("--processes must be 0 or more")
     if cfg.threads is not None and cfg.threads < 1:
         raise Sc2DataError("--threads must be at least 1")
-    if cfg.history and cfg.action_space != "macro":
-        raise Sc2DataError("--history goes with --action-space macro (the time since each "
-                           "macro last acted)")
     cfg.obs_config().check()
     if cfg.policy not in POLICIES:
         raise Sc2DataError(f"unknown policy {cfg.policy!r}; choose one of: {', '.join(POLICIES)}")

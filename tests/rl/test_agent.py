@@ -90,20 +90,21 @@ def test_a_bad_policy_is_one_line_before_anything_is_written(
     assert_one_line_error(code, err, "names no policy")
 
 
-def test_a_policy_agent_keeps_the_macro_clock_its_run_saw(tmp_path: Path) -> None:
+@pytest.mark.parametrize("space", ["macro", "paper"])
+def test_a_policy_agent_keeps_the_clock_its_run_saw(tmp_path: Path, space: str) -> None:
     """A run trained with ``--history`` sees, as a rollout agent, the time since each macro
-    acted, kept by the agent as the env keeps it."""
+    (paper space: each function) acted, kept by the agent as the env keeps it."""
     from tests.cli import exit_code
 
     run = tmp_path / "timed"
-    assert exit_code("rl", "train", "--out", run, "--action-space", "macro", "--history",
+    assert exit_code("rl", "train", "--out", run, "--action-space", space, "--history",
                      *TINY) == 0
     import sc2data.rl  # noqa: F401
     from sc2data.game.agents import make_agent
     from sc2data.game.env import make_env
-    from sc2data.rl.obs import MACROS
+    from sc2data.rl.obs import history_actions
 
-    n = len(MACROS)
+    n = len(history_actions(space))
     seen: list[np.ndarray] = []
     env = make_env("sim", seed=0)
     agent = make_agent(f"policy:{run}", seed=1)

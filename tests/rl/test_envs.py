@@ -207,13 +207,43 @@ def test_history_records_when_each_macro_last_acted() -> None:
     assert env._clock.last[MACROS.index("no_op")] >= 0, "no_op acts by waiting"
 
 
-def test_history_is_for_the_compact_macro_observation() -> None:
+def test_history_in_the_paper_space_times_each_function() -> None:
+    """Paper space: a function acts when its call is sent; an unavailable one is sent, and
+    timed, as ``no_op``; the vector ends with one feature per function."""
+    from sc2data.rl.obs import GAME_LOOPS, ObsConfig
+
+    env = BuildMarinesGym("paper", obs=ObsConfig("compact", size=32, history=True,
+                                                 action_space="paper"), game_loops=LOOPS)
+    check_env(env, skip_render_check=True)
+    n = len(PAPER_FUNCTIONS)
+    obs, info = env.reset(seed=3)
+    assert obs["vector"].shape[0] == env.observer.space["vector"].shape[0]
+    assert np.all(obs["vector"][-n:] == 1.0), "nothing has acted yet"
+    idle = PAPER_FUNCTIONS.index("select_idle_worker")
+    marine = PAPER_FUNCTIONS.index("Train_Marine_quick")
+    start = info["game_loop"]
+    obs, _, _, _, info = env.step(np.array([marine, 0, 0]))  # no barracks: sent as no_op
+    assert env._clock.last[marine] == -1
+    assert env._clock.last[PAPER_FUNCTIONS.index("no_op")] == start
+    env.step(np.array([PAPER_FUNCTIONS.index("select_rect"), 40, 40]))
+    acted = info["game_loop"]
+    obs, _, _, _, info = env.step(np.array([idle, 0, 0]))
+    tail = obs["vector"][-n:]
+    rect = PAPER_FUNCTIONS.index("select_rect")
+    assert env._clock.last[rect] == acted
+    assert tail[rect] == pytest.approx(np.log1p(info["game_loop"] - acted) / np.log1p(GAME_LOOPS))
+    assert tail[marine] == 1.0
+    env.reset(seed=3)
+    assert np.all(env._clock.last == -1), "reset clears the clock"
+
+
+def test_history_needs_the_compact_observation_of_its_space() -> None:
     from sc2data.rl.obs import ObsConfig
 
-    with pytest.raises(Sc2DataError, match="--history is for the macro space"):
-        BuildMarinesGym("paper", obs=ObsConfig("compact", history=True))
     with pytest.raises(Sc2DataError, match="--history needs --obs compact"):
         BuildMarinesGym("macro", obs=ObsConfig("stored", history=True))
+    with pytest.raises(ValueError, match="paper-space env with history"):
+        BuildMarinesGym("paper", obs=ObsConfig("compact", history=True))
 
 
 def test_the_macro_rules_agent_chooses_the_envs_macros() -> None:

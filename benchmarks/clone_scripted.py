@@ -1,0 +1,250 @@
+"""Can the paper space's policy play the scripted agent's game? Behaviour cloning of the scripted
+agent in pysc2's own action space, as a diagnostic of the RL experiment.
+
+The paper-space learners of a million decisions make 50–70 marines sampled and 0 by argmax
+(BENCHMARKS.md, "Paper-space runs of 1,000,000 decisions"): their most likely action is one
+call repeated. Either the spatial policy (:mod:`sc2data.rl.spatial`: a function, then its screen
+point given the function) cannot hold a plan on its observation, or PPO has not taught one. This
+script separates the two, as ``clone_rules.py`` does for the macro space. It plays
+``--episodes`` of the scripted agent (:class:`~sc2data.game.agents.ScriptedAgent`, the
+build order that makes ≈ 137 marines) in the run's paper-space env: at every pysc2 step the agent
+reads the env's observation and its call is sent as the paper action ``(function, x, y)`` that
+:func:`~sc2data.rl.envs.paper_call` turns back into the very same call (checked); a call the
+paper space cannot express (``Attack_screen``, which the agent uses to kill a marine at the
+supply cap) is sent as ``no_op``. Seeds 500,000,000 on, which training and evaluation never use.
+It fits a fresh policy of the run's settings to those actions by maximum likelihood under the
+action masks (the function, and the point where the function takes one; Adam, minibatches of
+256; the value head untouched; ``--balanced`` weights each function by the inverse of its
+share), reports on ``--held-out`` episodes it did not see how often the policy's most likely
+function is the agent's (per function and their mean) and, for the functions with a point, how
+often its most likely point lies within 4 pixels of the agent's, and writes the clone as a run
+folder that ``sc2data rl evaluate OUT`` plays sampled and argmax like any run and ``sc2data rl
+train --init-policy OUT`` starts PPO from; ``OUT/clone.json`` records the fit.
+
+    python benchmarks/clone_scripted.py RUN --out OUT [--episodes 16] [--held-out 2]
+        [--epochs 20] [--lr 1e-3] [--balanced]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import shutil
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from clone_rules import split
+from ppo_gradients import DEMO_SEED, Demonstrations
+
+from sc2data._pysc2 import actions
+from sc2data.game.agents import ScriptedAgent
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import PARTIAL, publish, write_atomic
+from sc2data.rl import runs
+from sc2data.rl.envs import PAPER_FUNCTIONS, RECT_HALF, BuildMarinesGym, paper_call
+from sc2data.rl.spatial import POINT_FUNCTIONS
+from sc2data.rl.train import game_loops, load_config, make_vec_env, new_model
+
+_F = actions.FUNCTIONS
+NO_OP = np.zeros(3, np.int64)
+NEAR = 4
+"""Pixels within which a point counts as the agent's (a cell of the 32-cell map is 2 pixels)."""
+
+
+def _arguments(call: actions.FunctionCall) -> list[list[int]]:
+    return [[int(v) for v in arg] for arg in call.arguments]
+
+
+def encode(call: actions.FunctionCall) -> np.ndarray | None:
+    """The paper action ``(function, x, y)`` whose :func:`paper_call` is ``call``; None where
+    the paper space cannot express it (another function, or other fixed arguments)."""
+    name = _F[call.function].name
+    if name not in PAPER_FUNCTIONS:
+        return None
+    x = y = 0
+    for spec, value in zip(_F[call.function].args, call.arguments, strict=True):
+        if spec.name == "screen":
+            x, y = int(value[0]), int(value[1])
+            if name == "select_rect":
+                x, y = x + RECT_HALF, y + RECT_HALF
+    action = np.array([PAPER_FUNCTIONS.index(name), x, y], np.int64)
+    back = paper_call(*(int(a) for a in action))
+    if int(back.function) != int(call.function) or _arguments(back) != _arguments(call):
+        return None
+    return action
+
+
+def demonstrate(cfg: Any, episodes: int, first_seed: int = DEMO_SEED
+                ) -> tuple[Demonstrations, dict[str, int]]:
+    """The scripted agent's decisions on ``episodes`` of the run's paper env (episode ``e``
+    seeded ``first_seed + e``), and how many of its calls were sent as ``no_op`` by name."""
+    env = BuildMarinesGym("paper", backend=cfg.backend, obs=cfg.obs_config(),
+                          game_loops=game_loops(cfg))
+    obs, masks, chosen, marines, episode = [], [], [], [], []
+    dropped: dict[str, int] = {}
+    try:
+        for e in range(episodes):
+            o, _ = env.reset(seed=first_seed + e)
+            agent = ScriptedAgent(first_seed + e)
+            agent.reset()
+            done = False
+            while not done:
+                call = agent.step(env.timestep)
+                action = encode(call)
+                if action is None:
+                    name = _F[call.function].name
+                    dropped[name] = dropped.get(name, 0) + 1
+                    action = NO_OP
+                obs.append(o)
+                masks.append(env.action_masks())
+                chosen.append(action)
+                episode.append(e)
+                o, _, done, _, info = env.step(action)
+            marines.append(int(info["marines"]))
+    finally:
+        env.close()
+    demos = Demonstrations({k: np.stack([x[k] for x in obs]) for k in obs[0]}, np.stack(masks),
+                           np.stack(chosen), np.zeros(len(chosen), np.float32), marines,
+                           np.asarray(episode, np.int64))
+    return demos, dropped
+
+
+def _batch(demos: Demonstrations, idx: np.ndarray) -> dict[str, torch.Tensor]:
+    return {k: torch.as_tensor(v[idx]).float() for k, v in demos.obs.items()}
+
+
+def most_likely(policy: Any, demos: Demonstrations, idx: np.ndarray) -> np.ndarray:
+    """The policy's most likely action ``(function, x, y)`` at each of the decisions ``idx``."""
+    out = []
+    with torch.no_grad():
+        for part in np.array_split(idx, max(1, len(idx) // 512)):
+            dist = policy.get_distribution(_batch(demos, part), action_masks=demos.masks[part])
+            out.append(dist.get_actions(deterministic=True).numpy())
+    return np.concatenate(out) if out else np.zeros((0, 3), np.int64)
+
+
+def accuracy(policy: Any, demos: Demonstrations, idx: np.ndarray) -> dict[str, float]:
+    """Per function the agent called at ``idx``: the share where the policy's most likely
+    function is the same (``balanced``: their mean); ``point``: over the agent's calls with a
+    point whose function the policy got right, the share of its points within :data:`NEAR`
+    pixels."""
+    best, truth = most_likely(policy, demos, idx), demos.actions[idx]
+    out = {name: float(np.mean(best[truth[:, 0] == i, 0] == i))
+           for i, name in enumerate(PAPER_FUNCTIONS) if (truth[:, 0] == i).any()}
+    out["balanced"] = float(np.mean(list(out.values()))) if out else float("nan")
+    takes = np.isin(truth[:, 0], [PAPER_FUNCTIONS.index(n) for n in POINT_FUNCTIONS])
+    right = takes & (best[:, 0] == truth[:, 0])
+    near = np.abs(best[:, 1:] - truth[:, 1:]).max(axis=1) <= NEAR
+    out["point"] = float(np.mean(near[right])) if right.any() else float("nan")
+    return out
+
+
+def fit(policy: Any, demos: Demonstrations, train: np.ndarray, test: np.ndarray, epochs: int,
+        lr: float, seed: int, balanced: bool) -> list[dict[str, float]]:
+    """Maximum likelihood of the agent's actions under the masks; per epoch the mean negative
+    log-likelihood and :func:`accuracy` (balanced, point) on both parts."""
+    params = [p for n, p in policy.named_parameters() if "value_net" not in n]
+    opt = torch.optim.Adam(params, lr=lr)
+    rng = np.random.default_rng(seed)
+    n = len(PAPER_FUNCTIONS)
+    counts = np.bincount(demos.actions[train, 0], minlength=n).astype(float)
+    weight = np.where(counts > 0, len(train) / (n * np.maximum(counts, 1)), 0.0) \
+        if balanced else np.ones(n)
+    log = []
+    for epoch in range(epochs):
+        losses = []
+        for part in np.array_split(rng.permutation(train), max(1, len(train) // 256)):
+            _, log_prob, _ = policy.evaluate_actions(
+                _batch(demos, part), torch.as_tensor(demos.actions[part]),
+                action_masks=demos.masks[part])
+            w = torch.as_tensor(weight[demos.actions[part, 0]], dtype=log_prob.dtype)
+            loss = -(w * log_prob).sum() / w.sum()
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            losses.append(float(loss.detach()))
+        a, b = accuracy(policy, demos, train), accuracy(policy, demos, test)
+        row = {"epoch": epoch + 1, "nll": float(np.mean(losses)),
+               "train_balanced": a["balanced"], "held_out_balanced": b["balanced"],
+               "train_point": a["point"], "held_out_point": b["point"]}
+        log.append(row)
+        print(f"epoch {row['epoch']:3d}  nll {row['nll']:.3f}  balanced accuracy train "
+              f"{a['balanced']:.3f} held out {b['balanced']:.3f}  point within {NEAR} px "
+              f"train {a['point']:.3f} held out {b['point']:.3f}", flush=True)
+    return log
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("run", type=Path, help="a paper-space run whose settings the clone takes")
+    ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--episodes", type=int, default=16)
+    ap.add_argument("--held-out", type=int, default=2)
+    ap.add_argument("--epochs", type=int, default=20)
+    ap.add_argument("--lr", type=float, default=1e-3)
+    ap.add_argument("--balanced", action="store_true",
+                    help="weight each function by the inverse of its share of the decisions")
+    args = ap.parse_args()
+    if args.episodes <= args.held_out or args.held_out < 1 or args.epochs < 1:
+        raise SystemExit("clone_scripted.py: --held-out must be at least 1 and below "
+                         "--episodes, --epochs at least 1")
+    if args.out.exists():
+        raise SystemExit(f"clone_scripted.py: {args.out} exists; pick another --out")
+    try:
+        cfg = load_config(args.run)
+    except Sc2DataError as e:
+        raise SystemExit(f"clone_scripted.py: {e}") from None
+    if cfg.action_space != "paper":
+        raise SystemExit("clone_scripted.py: the clone plays the paper space; "
+                         f"{args.run} is a {cfg.action_space}-space run")
+    cfg = dataclasses.replace(cfg, envs=1, processes=0, reward="sparse", shaping="event",
+                              mem=None, narration=None)
+    torch.set_num_threads(1)
+    t0 = time.perf_counter()
+    demos, dropped = demonstrate(cfg, args.episodes)
+    train, test = split(demos, args.held_out)
+    shares = {name: round(float(np.mean(demos.actions[:, 0] == i)), 4)
+              for i, name in enumerate(PAPER_FUNCTIONS)}
+    print(f"scripted: {len(demos.actions)} decisions over {args.episodes} episodes, "
+          f"{np.mean(demos.marines):.1f} marines an episode ({time.perf_counter() - t0:.0f} s); "
+          f"calls {shares}; sent as no_op {dropped}", flush=True)
+    vec = make_vec_env(cfg)
+    try:
+        model = new_model(cfg, vec, cfg.seed)
+        before = accuracy(model.policy, demos, test)
+        print(f"the untrained policy, held out: {before}", flush=True)
+        log = fit(model.policy, demos, train, test, args.epochs, args.lr, cfg.seed,
+                  args.balanced)
+        after = accuracy(model.policy, demos, test)
+        print(f"the cloned policy, held out: {after}", flush=True)
+    finally:
+        vec.close()
+    record = {"like": str(args.run), "episodes": args.episodes, "held_out": args.held_out,
+              "decisions": int(len(demos.actions)), "scripted_marines": demos.marines,
+              "scripted_calls": shares, "sent_as_no_op": dropped, "epochs": args.epochs,
+              "lr": args.lr, "balanced": args.balanced, "untrained_held_out": before,
+              "cloned_held_out": after, "log": log}
+    # written beside OUT and published whole: an interrupted clone leaves no OUT that looks
+    # like a run
+    tmp = args.out.with_name(f".{args.out.name}{PARTIAL}")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    try:
+        runs.write_record(tmp / runs.CONFIG, cfg.identity())
+        runs.commit(tmp, model, [], {"config": cfg.identity(), "episodes": []},
+                    {"timesteps": 0, "env_steps": 0, "episodes": 0, "resumes": 0})
+        write_atomic(tmp / "clone.json", (json.dumps(record, indent=1) + "\n").encode())
+        publish(tmp, args.out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    print(f"wrote {args.out} ({time.perf_counter() - t0:.0f} s); next: sc2data rl evaluate "
+          f"{args.out}")
+
+
+if __name__ == "__main__":
+    main()

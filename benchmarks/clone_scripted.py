@@ -21,13 +21,22 @@ often its most likely point lies within 4 pixels of the agent's, and writes the 
 folder that ``sc2data rl evaluate OUT`` plays sampled and argmax like any run and ``sc2data rl
 train --init-policy OUT`` starts PPO from; ``OUT/clone.json`` records the fit.
 
+``--dagger R`` then runs R rounds of DAgger (Ross et al. 2011), as ``clone_rules.py`` does: the
+clone plays ``--dagger-episodes`` episodes of its own (argmax on even episodes, sampled on odd),
+the scripted agent — stepped on the same observations, its build order going on from what the
+clone did — labels every state with the call it would send, those decisions join the training
+set and the fit goes on; the policy kept is the one whose round made the most marines by argmax
+(on training-side seeds: the evaluation episodes stay unseen).
+
     python benchmarks/clone_scripted.py RUN --out OUT [--episodes 16] [--held-out 2]
-        [--epochs 20] [--lr 1e-3] [--balanced]
+        [--epochs 20] [--lr 1e-3] [--balanced] [--dagger 0] [--dagger-episodes 4]
+        [--dagger-epochs 5] [--dagger-lr 3e-4]
 """
 
 from __future__ import annotations
 
 import argparse
+import copy
 import dataclasses
 import json
 import shutil
@@ -38,7 +47,7 @@ from typing import Any
 import numpy as np
 import torch
 from clone_rules import split
-from ppo_gradients import DEMO_SEED, Demonstrations
+from ppo_gradients import DEMO_SEED, Demonstrations, joined
 
 from sc2data._pysc2 import actions
 from sc2data.game.agents import ScriptedAgent
@@ -57,6 +66,15 @@ NEAR = 4
 
 def _arguments(call: actions.FunctionCall) -> list[list[int]]:
     return [[int(v) for v in arg] for arg in call.arguments]
+
+
+TIMERS: dict[str, tuple[str, int]] = {
+    "Build_SupplyDepot_screen": ("depot", 25), "Build_Barracks_screen": ("barracks", 25),
+    "Harvest_Gather_screen": ("gather", 4), "Train_SCV_quick": ("scv", 8),
+    "Train_Marine_quick": ("marine", 2),
+}
+"""The scripted agent's timers (:meth:`ScriptedAgent.next_macro`: the steps it holds off a
+macro after choosing it), set in DAgger from the call the policy sent."""
 
 
 def encode(call: actions.FunctionCall) -> np.ndarray | None:
@@ -78,10 +96,16 @@ def encode(call: actions.FunctionCall) -> np.ndarray | None:
     return action
 
 
-def demonstrate(cfg: Any, episodes: int, first_seed: int = DEMO_SEED
-                ) -> tuple[Demonstrations, dict[str, int]]:
+def demonstrate(cfg: Any, episodes: int, first_seed: int = DEMO_SEED, model: Any = None,
+                deterministic: bool = False) -> tuple[Demonstrations, dict[str, int]]:
     """The scripted agent's decisions on ``episodes`` of the run's paper env (episode ``e``
-    seeded ``first_seed + e``), and how many of its calls were sent as ``no_op`` by name."""
+    seeded ``first_seed + e``), and how many of its calls were sent as ``no_op`` by name. With
+    ``model`` (DAgger's labels), the model's policy plays (argmax with ``deterministic``, else
+    sampled) and the scripted agent, stepped on the same observations, labels each state with
+    the call it would send there: while the policy sends the function it was told, the agent's
+    build order goes on; where the policy sends another, the agent drops the macro it was
+    playing, undoes the timer its choice set, and takes the timer of the call the policy sent
+    (:data:`TIMERS`), so that its next label starts from what the policy did."""
     env = BuildMarinesGym("paper", backend=cfg.backend, obs=cfg.obs_config(),
                           game_loops=game_loops(cfg))
     obs, masks, chosen, marines, episode = [], [], [], [], []
@@ -91,19 +115,31 @@ def demonstrate(cfg: Any, episodes: int, first_seed: int = DEMO_SEED
             o, _ = env.reset(seed=first_seed + e)
             agent = ScriptedAgent(first_seed + e)
             agent.reset()
+            if model is not None:
+                model.set_random_seed(first_seed + e)
             done = False
             while not done:
+                before = dict(agent._wait)
                 call = agent.step(env.timestep)
                 action = encode(call)
                 if action is None:
                     name = _F[call.function].name
                     dropped[name] = dropped.get(name, 0) + 1
                     action = NO_OP
+                played = action
+                if model is not None:
+                    played = model.predict(o, action_masks=env.action_masks(),
+                                           deterministic=deterministic)[0]
                 obs.append(o)
                 masks.append(env.action_masks())
                 chosen.append(action)
                 episode.append(e)
-                o, _, done, _, info = env.step(action)
+                o, _, done, _, info = env.step(played)
+                if model is not None and int(played[0]) != int(action[0]):
+                    agent._macro, agent._wait = None, before
+                    timer = TIMERS.get(info["action"])
+                    if timer is not None and not info["invalid"]:
+                        agent._wait[timer[0]] = agent.steps + timer[1]
             marines.append(int(info["marines"]))
     finally:
         env.close()
@@ -178,6 +214,55 @@ def fit(policy: Any, demos: Demonstrations, train: np.ndarray, test: np.ndarray,
     return log
 
 
+DAGGER_SEED = DEMO_SEED + 100_000
+"""Round r's episode e is seeded ``DAGGER_SEED + 1,000·r + e``: apart from the scripted agent's
+episodes (``DEMO_SEED`` on), training's and evaluation's."""
+
+
+def dagger(model: Any, cfg: Any, demos: Demonstrations, train: np.ndarray, test: np.ndarray,
+           args: argparse.Namespace) -> tuple[Demonstrations, list[dict[str, Any]], list[Any]]:
+    """``args.dagger`` rounds of DAgger (Ross et al. 2011): the clone plays
+    ``args.dagger_episodes`` episodes (argmax on even ones, sampled on odd), the scripted agent
+    labels every state, those decisions join the training set and the fit goes on; then one more
+    round of episodes measures the last fit. The model is left with the policy whose round made
+    the most marines by argmax (round r measures the policy fitted before it)."""
+    rounds: list[dict[str, Any]] = []
+    policies, log = [], []
+    for r in range(1, args.dagger + 2):
+        t0 = time.perf_counter()
+        played: dict[str, list[int]] = {"argmax": [], "sampled": []}
+        new = None
+        for e in range(args.dagger_episodes):
+            mode = "argmax" if e % 2 == 0 else "sampled"
+            d, _ = demonstrate(cfg, 1, DAGGER_SEED + 1000 * r + e, model, mode == "argmax")
+            played[mode] += d.marines
+            new = d if new is None else joined(new, d)
+        assert new is not None
+        policies.append(copy.deepcopy(model.policy.state_dict()))
+        agree = float(np.mean(most_likely(model.policy, new, np.arange(len(new.actions)))[:, 0]
+                              == new.actions[:, 0]))
+        rounds.append({"round": r, "argmax_marines": played["argmax"],
+                       "sampled_marines": played["sampled"], "decisions": int(len(new.actions)),
+                       "function_agreement": agree})
+        print(f"DAgger round {r}: the clone made {np.mean(played['argmax']):.1f} marines by "
+              f"argmax, {np.mean(played['sampled']):.1f} sampled; its most likely function the "
+              f"scripted agent's at {agree:.3f} of {len(new.actions)} decisions "
+              f"({time.perf_counter() - t0:.0f} s)", flush=True)
+        if r > args.dagger:
+            break
+        start = len(demos.actions)
+        demos = joined(demos, new)
+        train = np.concatenate([train, np.arange(start, len(demos.actions))])
+        log += fit(model.policy, demos, train, test, args.dagger_epochs, args.dagger_lr,
+                   cfg.seed + r, args.balanced)
+    best = max(range(len(rounds)), key=lambda i: (np.mean(rounds[i]["argmax_marines"]), i))
+    model.policy.load_state_dict(policies[best])
+    for i, row in enumerate(rounds):
+        row["kept"] = i == best
+    print(f"kept the policy round {best + 1} played", flush=True)
+    return demos, rounds, log
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run", type=Path, help="a paper-space run whose settings the clone takes")
@@ -188,10 +273,18 @@ def main() -> None:
     ap.add_argument("--lr", type=float, default=1e-3)
     ap.add_argument("--balanced", action="store_true",
                     help="weight each function by the inverse of its share of the decisions")
+    ap.add_argument("--dagger", type=int, default=0, help="DAgger rounds after the first fit")
+    ap.add_argument("--dagger-episodes", type=int, default=4, help="the clone's episodes a round")
+    ap.add_argument("--dagger-epochs", type=int, default=5, help="epochs of fitting a round")
+    ap.add_argument("--dagger-lr", type=float, default=3e-4, help="Adam's step in the rounds")
     args = ap.parse_args()
     if args.episodes <= args.held_out or args.held_out < 1 or args.epochs < 1:
         raise SystemExit("clone_scripted.py: --held-out must be at least 1 and below "
                          "--episodes, --epochs at least 1")
+    if args.dagger < 0 or args.dagger_episodes < 1 or args.dagger_epochs < 1 or \
+            args.dagger_lr <= 0:
+        raise SystemExit("clone_scripted.py: --dagger must be at least 0, --dagger-episodes and "
+                         "--dagger-epochs at least 1, --dagger-lr above 0")
     if args.out.exists():
         raise SystemExit(f"clone_scripted.py: {args.out} exists; pick another --out")
     try:
@@ -221,13 +314,21 @@ def main() -> None:
                   args.balanced)
         after = accuracy(model.policy, demos, test)
         print(f"the cloned policy, held out: {after}", flush=True)
+        rounds: list[dict[str, Any]] = []
+        if args.dagger:
+            demos, rounds, more = dagger(model, cfg, demos, train, test, args)
+            log += more
+            after = accuracy(model.policy, demos, test)
+            print(f"after DAgger, held out: {after}", flush=True)
     finally:
         vec.close()
     record = {"like": str(args.run), "episodes": args.episodes, "held_out": args.held_out,
               "decisions": int(len(demos.actions)), "scripted_marines": demos.marines,
               "scripted_calls": shares, "sent_as_no_op": dropped, "epochs": args.epochs,
               "lr": args.lr, "balanced": args.balanced, "untrained_held_out": before,
-              "cloned_held_out": after, "log": log}
+              "cloned_held_out": after, "log": log,
+              "dagger": {"rounds": rounds, "episodes": args.dagger_episodes,
+                         "epochs": args.dagger_epochs, "lr": args.dagger_lr}}
     # written beside OUT and published whole: an interrupted clone leaves no OUT that looks
     # like a run
     tmp = args.out.with_name(f".{args.out.name}{PARTIAL}")

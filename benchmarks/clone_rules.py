@@ -45,6 +45,7 @@ import dataclasses
 import json
 import shutil
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -149,31 +150,35 @@ def dagger_episodes(model: Any, cfg: Any, r: int, episodes: int
 
 
 def dagger(model: Any, cfg: Any, demos: Demonstrations, train: np.ndarray, test: np.ndarray,
-           args: argparse.Namespace) -> tuple[Demonstrations, list[dict[str, Any]], list[Any]]:
+           args: argparse.Namespace, episodes: Callable[..., Any] = dagger_episodes,
+           fit_more: Callable[..., Any] = fit
+           ) -> tuple[Demonstrations, list[dict[str, Any]], list[Any]]:
     """``args.dagger`` rounds (see the module docstring), then one more round of episodes that
     only measures the last fit; the model is left with the policy whose round made the most
     marines by argmax (round r measures the policy fitted before it). Returns the aggregate,
-    the rounds' records and the fits' log."""
+    the rounds' records and the fits' log. ``episodes`` plays and labels a round (as
+    :func:`dagger_episodes`) and ``fit_more`` fits (as :func:`fit`): ``clone_scripted.py``
+    passes its own for the paper space."""
     rounds: list[dict[str, Any]] = []
     policies, log = [], []
     for r in range(1, args.dagger + 2):
         t0 = time.perf_counter()
-        new, played, agree = dagger_episodes(model, cfg, r, args.dagger_episodes)
+        new, played, agree = episodes(model, cfg, r, args.dagger_episodes)
         policies.append(copy.deepcopy(model.policy.state_dict()))
         rounds.append({"round": r, "argmax_marines": played["argmax"],
                        "sampled_marines": played["sampled"], "decisions": int(len(new.actions)),
                        "agreement": agree})
         print(f"DAgger round {r}: the clone made {np.mean(played['argmax']):.1f} marines by "
               f"argmax, {np.mean(played['sampled']):.1f} sampled; {len(new.actions)} decisions, "
-              f"its argmax the rules' choice at {agree:.3f} of them "
+              f"its argmax the labeller's choice at {agree:.3f} of them "
               f"({time.perf_counter() - t0:.0f} s)", flush=True)
         if r > args.dagger:
             break
         start = len(demos.actions)
         demos = joined(demos, new)
         train = np.concatenate([train, np.arange(start, len(demos.actions))])
-        log += fit(model.policy, demos, train, test, args.dagger_epochs, args.dagger_lr,
-                   cfg.seed + r, args.balanced)
+        log += fit_more(model.policy, demos, train, test, args.dagger_epochs, args.dagger_lr,
+                        cfg.seed + r, args.balanced)
     best = max(range(len(rounds)), key=lambda i: (np.mean(rounds[i]["argmax_marines"]), i))
     model.policy.load_state_dict(policies[best])
     for i, row in enumerate(rounds):
@@ -182,39 +187,54 @@ def dagger(model: Any, cfg: Any, demos: Demonstrations, train: np.ndarray, test:
     return demos, rounds, log
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("run", type=Path, help="a macro-space run whose settings the clone takes")
+def add_options(ap: argparse.ArgumentParser, *, epochs: int, lr: float, dagger_episodes: int,
+                dagger_epochs: int, unit: str) -> None:
+    """The options both cloning scripts take (``unit``: what ``--balanced`` weighs)."""
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--episodes", type=int, default=16)
     ap.add_argument("--held-out", type=int, default=2)
-    ap.add_argument("--epochs", type=int, default=30)
-    ap.add_argument("--lr", type=float, default=3e-4)
+    ap.add_argument("--epochs", type=int, default=epochs)
+    ap.add_argument("--lr", type=float, default=lr)
     ap.add_argument("--balanced", action="store_true",
-                    help="weight each macro by the inverse of its share of the decisions")
-    ap.add_argument("--history", action=argparse.BooleanOptionalAction, default=None,
-                    help="the time since each macro last acted (default: as the run)")
+                    help=f"weight each {unit} by the inverse of its share of the decisions")
     ap.add_argument("--dagger", type=int, default=0, help="DAgger rounds after the first fit")
-    ap.add_argument("--dagger-episodes", type=int, default=8, help="the clone's episodes a round")
-    ap.add_argument("--dagger-epochs", type=int, default=10, help="epochs of fitting a round")
+    ap.add_argument("--dagger-episodes", type=int, default=dagger_episodes,
+                    help="the clone's episodes a round")
+    ap.add_argument("--dagger-epochs", type=int, default=dagger_epochs,
+                    help="epochs of fitting a round")
     ap.add_argument("--dagger-lr", type=float, default=3e-4, help="Adam's step in the rounds")
-    args = ap.parse_args()
+
+
+def checked_config(args: argparse.Namespace, prog: str, space: str, why: str) -> Any:
+    """The settings run's config, the options checked: one line and an exit where one is wrong
+    (``why``: what needs the ``space``)."""
     if args.episodes <= args.held_out or args.held_out < 1 or args.epochs < 1:
-        raise SystemExit("clone_rules.py: --held-out must be at least 1 and below --episodes, "
+        raise SystemExit(f"{prog}: --held-out must be at least 1 and below --episodes, "
                          "--epochs at least 1")
     if args.dagger < 0 or args.dagger_episodes < 1 or args.dagger_epochs < 1 or \
             args.dagger_lr <= 0:
-        raise SystemExit("clone_rules.py: --dagger must be at least 0, --dagger-episodes and "
+        raise SystemExit(f"{prog}: --dagger must be at least 0, --dagger-episodes and "
                          "--dagger-epochs at least 1, --dagger-lr above 0")
     if args.out.exists():
-        raise SystemExit(f"clone_rules.py: {args.out} exists; pick another --out")
+        raise SystemExit(f"{prog}: {args.out} exists; pick another --out")
     try:
         cfg = load_config(args.run)
     except Sc2DataError as e:
-        raise SystemExit(f"clone_rules.py: {e}") from None
-    if cfg.action_space != "macro":
-        raise SystemExit("clone_rules.py: the macro-rules agent plays the macro space; "
-                         f"{args.run} is a {cfg.action_space}-space run")
+        raise SystemExit(f"{prog}: {e}") from None
+    if cfg.action_space != space:
+        raise SystemExit(f"{prog}: {why}; {args.run} is a {cfg.action_space}-space run")
+    return cfg
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("run", type=Path, help="a macro-space run whose settings the clone takes")
+    add_options(ap, epochs=30, lr=3e-4, dagger_episodes=8, dagger_epochs=10, unit="macro")
+    ap.add_argument("--history", action=argparse.BooleanOptionalAction, default=None,
+                    help="the time since each macro last acted (default: as the run)")
+    args = ap.parse_args()
+    cfg = checked_config(args, "clone_rules.py", "macro",
+                         "the macro-rules agent plays the macro space")
     history = cfg.history if args.history is None else args.history
     cfg = dataclasses.replace(cfg, envs=1, processes=0, reward="sparse", shaping="event",
                               mem=None, narration=None, history=history)
@@ -250,9 +270,17 @@ def main() -> None:
               "history": history, "untrained_held_out": before, "cloned_held_out": after,
               "log": log, "dagger": {"rounds": rounds, "episodes": args.dagger_episodes,
                                      "epochs": args.dagger_epochs, "lr": args.dagger_lr}}
-    # written beside OUT and published whole (as rl fork does): an interrupted clone leaves no
-    # OUT that looks like a run
-    tmp = args.out.with_name(f".{args.out.name}{PARTIAL}")
+    write_clone(args.out, cfg, model, record)
+    print(f"wrote {args.out} ({time.perf_counter() - t0:.0f} s); next: sc2data rl evaluate "
+          f"{args.out}")
+
+
+def write_clone(out: Path, cfg: Any, model: Any, record: dict[str, Any]) -> None:
+    """The cloned policy as a run folder ``out`` (``cfg``'s ``config.json``, the policy
+    committed as ``rl train`` commits one, no training episodes) with ``record`` as its
+    ``clone.json``; written beside ``out`` and published whole (as ``rl fork`` does): an
+    interrupted clone leaves no ``out`` that looks like a run."""
+    tmp = out.with_name(f".{out.name}{PARTIAL}")
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)
     try:
@@ -260,12 +288,10 @@ def main() -> None:
         runs.commit(tmp, model, [], {"config": cfg.identity(), "episodes": []},
                     {"timesteps": 0, "env_steps": 0, "episodes": 0, "resumes": 0})
         write_atomic(tmp / "clone.json", (json.dumps(record, indent=1) + "\n").encode())
-        publish(tmp, args.out)
+        publish(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    print(f"wrote {args.out} ({time.perf_counter() - t0:.0f} s); next: sc2data rl evaluate "
-          f"{args.out}")
 
 
 if __name__ == "__main__":

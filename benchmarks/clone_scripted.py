@@ -36,27 +36,21 @@ set and the fit goes on; the policy kept is the one whose round made the most ma
 from __future__ import annotations
 
 import argparse
-import copy
 import dataclasses
-import json
-import shutil
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
-from clone_rules import split
+from clone_rules import DAGGER_SEED, add_options, checked_config, dagger, split, write_clone
 from ppo_gradients import DEMO_SEED, Demonstrations, joined
 
 from sc2data._pysc2 import actions
 from sc2data.game.agents import ScriptedAgent
-from sc2data.ground.errors import Sc2DataError
-from sc2data.ground.files import PARTIAL, publish, write_atomic
-from sc2data.rl import runs
 from sc2data.rl.envs import PAPER_FUNCTIONS, RECT_HALF, BuildMarinesGym, paper_call
 from sc2data.rl.spatial import POINT_FUNCTIONS
-from sc2data.rl.train import game_loops, load_config, make_vec_env, new_model
+from sc2data.rl.train import game_loops, make_vec_env, new_model
 
 _F = actions.FUNCTIONS
 NO_OP = np.zeros(3, np.int64)
@@ -214,86 +208,30 @@ def fit(policy: Any, demos: Demonstrations, train: np.ndarray, test: np.ndarray,
     return log
 
 
-DAGGER_SEED = DEMO_SEED + 100_000
-"""Round r's episode e is seeded ``DAGGER_SEED + 1,000·r + e``: apart from the scripted agent's
-episodes (``DEMO_SEED`` on), training's and evaluation's."""
-
-
-def dagger(model: Any, cfg: Any, demos: Demonstrations, train: np.ndarray, test: np.ndarray,
-           args: argparse.Namespace) -> tuple[Demonstrations, list[dict[str, Any]], list[Any]]:
-    """``args.dagger`` rounds of DAgger (Ross et al. 2011): the clone plays
-    ``args.dagger_episodes`` episodes (argmax on even ones, sampled on odd), the scripted agent
-    labels every state, those decisions join the training set and the fit goes on; then one more
-    round of episodes measures the last fit. The model is left with the policy whose round made
-    the most marines by argmax (round r measures the policy fitted before it)."""
-    rounds: list[dict[str, Any]] = []
-    policies, log = [], []
-    for r in range(1, args.dagger + 2):
-        t0 = time.perf_counter()
-        played: dict[str, list[int]] = {"argmax": [], "sampled": []}
-        new = None
-        for e in range(args.dagger_episodes):
-            mode = "argmax" if e % 2 == 0 else "sampled"
-            d, _ = demonstrate(cfg, 1, DAGGER_SEED + 1000 * r + e, model, mode == "argmax")
-            played[mode] += d.marines
-            new = d if new is None else joined(new, d)
-        assert new is not None
-        policies.append(copy.deepcopy(model.policy.state_dict()))
-        agree = float(np.mean(most_likely(model.policy, new, np.arange(len(new.actions)))[:, 0]
-                              == new.actions[:, 0]))
-        rounds.append({"round": r, "argmax_marines": played["argmax"],
-                       "sampled_marines": played["sampled"], "decisions": int(len(new.actions)),
-                       "function_agreement": agree})
-        print(f"DAgger round {r}: the clone made {np.mean(played['argmax']):.1f} marines by "
-              f"argmax, {np.mean(played['sampled']):.1f} sampled; its most likely function the "
-              f"scripted agent's at {agree:.3f} of {len(new.actions)} decisions "
-              f"({time.perf_counter() - t0:.0f} s)", flush=True)
-        if r > args.dagger:
-            break
-        start = len(demos.actions)
-        demos = joined(demos, new)
-        train = np.concatenate([train, np.arange(start, len(demos.actions))])
-        log += fit(model.policy, demos, train, test, args.dagger_epochs, args.dagger_lr,
-                   cfg.seed + r, args.balanced)
-    best = max(range(len(rounds)), key=lambda i: (np.mean(rounds[i]["argmax_marines"]), i))
-    model.policy.load_state_dict(policies[best])
-    for i, row in enumerate(rounds):
-        row["kept"] = i == best
-    print(f"kept the policy round {best + 1} played", flush=True)
-    return demos, rounds, log
+def dagger_episodes(model: Any, cfg: Any, r: int, episodes: int
+                    ) -> tuple[Demonstrations, dict[str, list[int]], float]:
+    """Round ``r``'s episodes of the clone (argmax on even ones, sampled on odd), every state
+    labelled by the scripted agent (:func:`demonstrate`); the marines of each mode and how often
+    the clone's most likely function was the label's (``clone_rules.dagger`` runs the rounds)."""
+    played: dict[str, list[int]] = {"argmax": [], "sampled": []}
+    new = None
+    for e in range(episodes):
+        mode = "argmax" if e % 2 == 0 else "sampled"
+        d, _ = demonstrate(cfg, 1, DAGGER_SEED + 1000 * r + e, model, mode == "argmax")
+        played[mode] += d.marines
+        new = d if new is None else joined(new, d)
+    assert new is not None
+    agree = float(np.mean(most_likely(model.policy, new, np.arange(len(new.actions)))[:, 0]
+                          == new.actions[:, 0]))
+    return new, played, agree
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run", type=Path, help="a paper-space run whose settings the clone takes")
-    ap.add_argument("--out", type=Path, required=True)
-    ap.add_argument("--episodes", type=int, default=16)
-    ap.add_argument("--held-out", type=int, default=2)
-    ap.add_argument("--epochs", type=int, default=20)
-    ap.add_argument("--lr", type=float, default=1e-3)
-    ap.add_argument("--balanced", action="store_true",
-                    help="weight each function by the inverse of its share of the decisions")
-    ap.add_argument("--dagger", type=int, default=0, help="DAgger rounds after the first fit")
-    ap.add_argument("--dagger-episodes", type=int, default=4, help="the clone's episodes a round")
-    ap.add_argument("--dagger-epochs", type=int, default=5, help="epochs of fitting a round")
-    ap.add_argument("--dagger-lr", type=float, default=3e-4, help="Adam's step in the rounds")
+    add_options(ap, epochs=20, lr=1e-3, dagger_episodes=4, dagger_epochs=5, unit="function")
     args = ap.parse_args()
-    if args.episodes <= args.held_out or args.held_out < 1 or args.epochs < 1:
-        raise SystemExit("clone_scripted.py: --held-out must be at least 1 and below "
-                         "--episodes, --epochs at least 1")
-    if args.dagger < 0 or args.dagger_episodes < 1 or args.dagger_epochs < 1 or \
-            args.dagger_lr <= 0:
-        raise SystemExit("clone_scripted.py: --dagger must be at least 0, --dagger-episodes and "
-                         "--dagger-epochs at least 1, --dagger-lr above 0")
-    if args.out.exists():
-        raise SystemExit(f"clone_scripted.py: {args.out} exists; pick another --out")
-    try:
-        cfg = load_config(args.run)
-    except Sc2DataError as e:
-        raise SystemExit(f"clone_scripted.py: {e}") from None
-    if cfg.action_space != "paper":
-        raise SystemExit("clone_scripted.py: the clone plays the paper space; "
-                         f"{args.run} is a {cfg.action_space}-space run")
+    cfg = checked_config(args, "clone_scripted.py", "paper", "the clone plays the paper space")
     cfg = dataclasses.replace(cfg, envs=1, processes=0, reward="sparse", shaping="event",
                               mem=None, narration=None)
     torch.set_num_threads(1)
@@ -316,7 +254,8 @@ def main() -> None:
         print(f"the cloned policy, held out: {after}", flush=True)
         rounds: list[dict[str, Any]] = []
         if args.dagger:
-            demos, rounds, more = dagger(model, cfg, demos, train, test, args)
+            demos, rounds, more = dagger(model, cfg, demos, train, test, args,
+                                         episodes=dagger_episodes, fit_more=fit)
             log += more
             after = accuracy(model.policy, demos, test)
             print(f"after DAgger, held out: {after}", flush=True)
@@ -329,20 +268,7 @@ def main() -> None:
               "cloned_held_out": after, "log": log,
               "dagger": {"rounds": rounds, "episodes": args.dagger_episodes,
                          "epochs": args.dagger_epochs, "lr": args.dagger_lr}}
-    # written beside OUT and published whole: an interrupted clone leaves no OUT that looks
-    # like a run
-    tmp = args.out.with_name(f".{args.out.name}{PARTIAL}")
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    try:
-        runs.write_record(tmp / runs.CONFIG, cfg.identity())
-        runs.commit(tmp, model, [], {"config": cfg.identity(), "episodes": []},
-                    {"timesteps": 0, "env_steps": 0, "episodes": 0, "resumes": 0})
-        write_atomic(tmp / "clone.json", (json.dumps(record, indent=1) + "\n").encode())
-        publish(tmp, args.out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+    write_clone(args.out, cfg, model, record)
     print(f"wrote {args.out} ({time.perf_counter() - t0:.0f} s); next: sc2data rl evaluate "
           f"{args.out}")
 

@@ -187,6 +187,35 @@ def dagger(model: Any, cfg: Any, demos: Demonstrations, train: np.ndarray, test:
     return demos, rounds, log
 
 
+def clone(cfg: Any, demos: Demonstrations, train: np.ndarray, test: np.ndarray,
+          args: argparse.Namespace, measure: Callable[..., Any] = recalls,
+          fit_first: Callable[..., Any] = fit, episodes: Callable[..., Any] = dagger_episodes
+          ) -> tuple[Any, Demonstrations, Any, Any, list[Any], list[dict[str, Any]]]:
+    """A fresh model of the run's settings, its policy fitted to ``demos`` (``fit_first``) and
+    then, with ``args.dagger``, through DAgger's rounds (``episodes``); ``measure`` (held out)
+    before and after. Returns the model, the demonstrations (with DAgger's), both
+    measurements, the fits' log and DAgger's rounds."""
+    vec = make_vec_env(cfg)
+    try:
+        model = new_model(cfg, vec, cfg.seed)
+        before = measure(model.policy, demos, test)
+        print(f"the untrained policy, held out: {before}", flush=True)
+        log = fit_first(model.policy, demos, train, test, args.epochs, args.lr, cfg.seed,
+                        args.balanced)
+        after = measure(model.policy, demos, test)
+        print(f"the cloned policy, held out: {after}", flush=True)
+        rounds: list[dict[str, Any]] = []
+        if args.dagger:
+            demos, rounds, more = dagger(model, cfg, demos, train, test, args, episodes,
+                                         fit_first)
+            log += more
+            after = measure(model.policy, demos, test)
+            print(f"after DAgger, held out: {after}", flush=True)
+    finally:
+        vec.close()
+    return model, demos, before, after, log, rounds
+
+
 def add_options(ap: argparse.ArgumentParser, *, epochs: int, lr: float, dagger_episodes: int,
                 dagger_epochs: int, unit: str) -> None:
     """The options both cloning scripts take (``unit``: what ``--balanced`` weighs)."""
@@ -246,23 +275,7 @@ def main() -> None:
     print(f"macro-rules: {len(demos.actions)} decisions over {args.episodes} episodes, "
           f"{np.mean(demos.marines):.1f} marines an episode ({time.perf_counter() - t0:.0f} s); "
           f"decisions {shares}", flush=True)
-    vec = make_vec_env(cfg)
-    try:
-        model = new_model(cfg, vec, cfg.seed)
-        before = recalls(model.policy, demos, test)
-        print(f"the untrained policy, held out: {before}", flush=True)
-        log = fit(model.policy, demos, train, test, args.epochs, args.lr, cfg.seed,
-                  args.balanced)
-        after = recalls(model.policy, demos, test)
-        print(f"the cloned policy, held out: {after}", flush=True)
-        rounds: list[dict[str, Any]] = []
-        if args.dagger:
-            demos, rounds, more = dagger(model, cfg, demos, train, test, args)
-            log += more
-            after = recalls(model.policy, demos, test)
-            print(f"after DAgger, held out: {after}", flush=True)
-    finally:
-        vec.close()
+    model, demos, before, after, log, rounds = clone(cfg, demos, train, test, args)
     record = {"like": str(args.run), "episodes": args.episodes, "held_out": args.held_out,
               "decisions": int(len(demos.actions)), "rules_marines": demos.marines,
               "rules_decisions": shares, "epochs": args.epochs, "lr": args.lr,

@@ -43,14 +43,14 @@ from typing import Any
 
 import numpy as np
 import torch
-from clone_rules import DAGGER_SEED, add_options, checked_config, dagger, split, write_clone
+from clone_rules import DAGGER_SEED, add_options, checked_config, clone, split, write_clone
 from ppo_gradients import DEMO_SEED, Demonstrations, joined
 
 from sc2data._pysc2 import actions
 from sc2data.game.agents import ScriptedAgent
 from sc2data.rl.envs import PAPER_FUNCTIONS, RECT_HALF, BuildMarinesGym, paper_call
 from sc2data.rl.spatial import POINT_FUNCTIONS
-from sc2data.rl.train import game_loops, make_vec_env, new_model
+from sc2data.rl.train import game_loops
 
 _F = actions.FUNCTIONS
 NO_OP = np.zeros(3, np.int64)
@@ -243,24 +243,8 @@ def main() -> None:
     print(f"scripted: {len(demos.actions)} decisions over {args.episodes} episodes, "
           f"{np.mean(demos.marines):.1f} marines an episode ({time.perf_counter() - t0:.0f} s); "
           f"calls {shares}; sent as no_op {dropped}", flush=True)
-    vec = make_vec_env(cfg)
-    try:
-        model = new_model(cfg, vec, cfg.seed)
-        before = accuracy(model.policy, demos, test)
-        print(f"the untrained policy, held out: {before}", flush=True)
-        log = fit(model.policy, demos, train, test, args.epochs, args.lr, cfg.seed,
-                  args.balanced)
-        after = accuracy(model.policy, demos, test)
-        print(f"the cloned policy, held out: {after}", flush=True)
-        rounds: list[dict[str, Any]] = []
-        if args.dagger:
-            demos, rounds, more = dagger(model, cfg, demos, train, test, args,
-                                         episodes=dagger_episodes, fit_more=fit)
-            log += more
-            after = accuracy(model.policy, demos, test)
-            print(f"after DAgger, held out: {after}", flush=True)
-    finally:
-        vec.close()
+    model, demos, before, after, log, rounds = clone(cfg, demos, train, test, args, accuracy,
+                                                     fit, dagger_episodes)
     record = {"like": str(args.run), "episodes": args.episodes, "held_out": args.held_out,
               "decisions": int(len(demos.actions)), "scripted_marines": demos.marines,
               "scripted_calls": shares, "sent_as_no_op": dropped, "epochs": args.epochs,

@@ -66,18 +66,19 @@ def split(demos: Demonstrations, held_out: int) -> tuple[np.ndarray, np.ndarray]
     return np.flatnonzero(~test), np.flatnonzero(test)
 
 
-def _batch(demos: Demonstrations, idx: np.ndarray) -> dict[str, torch.Tensor]:
+def batch(demos: Demonstrations, idx: np.ndarray) -> dict[str, torch.Tensor]:
     return {k: torch.as_tensor(v[idx]).float() for k, v in demos.obs.items()}
 
 
 def predictions(policy: Any, demos: Demonstrations, idx: np.ndarray) -> np.ndarray:
-    """The policy's most likely allowed macro at each of the decisions ``idx``."""
+    """The policy's most likely allowed action at each of the decisions ``idx``: a macro (in
+    the paper space, ``(function, x, y)``)."""
     out = []
     with torch.no_grad():
         for part in np.array_split(idx, max(1, len(idx) // 512)):
-            dist = policy.get_distribution(_batch(demos, part), action_masks=demos.masks[part])
-            out.append(dist.distribution.probs.argmax(-1).numpy())
-    return np.concatenate(out) if out else np.zeros(0, np.int64)
+            dist = policy.get_distribution(batch(demos, part), action_masks=demos.masks[part])
+            out.append(dist.get_actions(deterministic=True).numpy())
+    return np.concatenate(out) if out else np.zeros((0, *demos.actions.shape[1:]), np.int64)
 
 
 def recalls(policy: Any, demos: Demonstrations, idx: np.ndarray) -> dict[str, float]:
@@ -91,32 +92,54 @@ def recalls(policy: Any, demos: Demonstrations, idx: np.ndarray) -> dict[str, fl
     return out
 
 
+def policy_optimizer(policy: Any, lr: float) -> torch.optim.Optimizer:
+    """Adam over the policy's parameters but the value head's (cloning leaves it untouched)."""
+    return torch.optim.Adam([p for n, p in policy.named_parameters() if "value_net" not in n],
+                            lr=lr)
+
+
+def class_weights(labels: np.ndarray, train: np.ndarray, n: int, balanced: bool) -> np.ndarray:
+    """Each of the ``n`` classes' weight in the loss: 1, or with ``balanced`` the inverse of its
+    share of the training decisions (0 for one never taken)."""
+    if not balanced:
+        return np.ones(n)
+    counts = np.bincount(labels[train], minlength=n).astype(float)
+    return np.where(counts > 0, len(train) / (n * np.maximum(counts, 1)), 0.0)
+
+
+def likelihood_epoch(policy: Any, opt: torch.optim.Optimizer, demos: Demonstrations,
+                     train: np.ndarray, weight: np.ndarray, labels: np.ndarray,
+                     rng: np.random.Generator) -> float:
+    """One epoch of maximum likelihood of the demonstrated actions under their masks,
+    minibatches of 256, each decision weighted by its class's ``weight`` (``labels``: its
+    class); the mean loss."""
+    losses = []
+    for part in np.array_split(rng.permutation(train), max(1, len(train) // 256)):
+        _, log_prob, _ = policy.evaluate_actions(
+            batch(demos, part), torch.as_tensor(demos.actions[part]),
+            action_masks=demos.masks[part])
+        w = torch.as_tensor(weight[labels[part]], dtype=log_prob.dtype)
+        loss = -(w * log_prob).sum() / w.sum()
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        losses.append(float(loss.detach()))
+    return float(np.mean(losses))
+
+
 def fit(policy: Any, demos: Demonstrations, train: np.ndarray, test: np.ndarray, epochs: int,
         lr: float, seed: int, balanced: bool = False) -> list[dict[str, float]]:
     """Maximum likelihood of the agent's macros under the masks; per epoch the mean negative
     log-likelihood and the balanced accuracy (:func:`recalls`) on both parts. ``balanced``:
     each decision weighted by the inverse of its macro's share of the training decisions, so
     that every macro weighs as much in the loss as the waits do."""
-    params = [p for n, p in policy.named_parameters() if "value_net" not in n]
-    opt = torch.optim.Adam(params, lr=lr)
+    opt = policy_optimizer(policy, lr)
     rng = np.random.default_rng(seed)
-    counts = np.bincount(demos.actions[train], minlength=len(MACROS)).astype(float)
-    weight = np.where(counts > 0, len(train) / (len(MACROS) * np.maximum(counts, 1)), 0.0) \
-        if balanced else np.ones(len(MACROS))
+    weight = class_weights(demos.actions, train, len(MACROS), balanced)
     log = []
     for epoch in range(epochs):
-        losses = []
-        for part in np.array_split(rng.permutation(train), max(1, len(train) // 256)):
-            _, log_prob, _ = policy.evaluate_actions(
-                _batch(demos, part), torch.as_tensor(demos.actions[part]),
-                action_masks=demos.masks[part])
-            w = torch.as_tensor(weight[demos.actions[part]], dtype=log_prob.dtype)
-            loss = -(w * log_prob).sum() / w.sum()
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-            losses.append(float(loss.detach()))
-        row = {"epoch": epoch + 1, "nll": float(np.mean(losses)),
+        nll = likelihood_epoch(policy, opt, demos, train, weight, demos.actions, rng)
+        row = {"epoch": epoch + 1, "nll": nll,
                "train_balanced": recalls(policy, demos, train)["balanced"],
                "held_out_balanced": recalls(policy, demos, test)["balanced"]}
         log.append(row)

@@ -43,7 +43,18 @@ from typing import Any
 
 import numpy as np
 import torch
-from clone_rules import DAGGER_SEED, add_options, checked_config, clone, split, write_clone
+from clone_rules import (
+    DAGGER_SEED,
+    add_options,
+    checked_config,
+    class_weights,
+    clone,
+    likelihood_epoch,
+    policy_optimizer,
+    predictions,
+    split,
+    write_clone,
+)
 from ppo_gradients import DEMO_SEED, Demonstrations, joined
 
 from sc2data._pysc2 import actions
@@ -143,26 +154,12 @@ def demonstrate(cfg: Any, episodes: int, first_seed: int = DEMO_SEED, model: Any
     return demos, dropped
 
 
-def _batch(demos: Demonstrations, idx: np.ndarray) -> dict[str, torch.Tensor]:
-    return {k: torch.as_tensor(v[idx]).float() for k, v in demos.obs.items()}
-
-
-def most_likely(policy: Any, demos: Demonstrations, idx: np.ndarray) -> np.ndarray:
-    """The policy's most likely action ``(function, x, y)`` at each of the decisions ``idx``."""
-    out = []
-    with torch.no_grad():
-        for part in np.array_split(idx, max(1, len(idx) // 512)):
-            dist = policy.get_distribution(_batch(demos, part), action_masks=demos.masks[part])
-            out.append(dist.get_actions(deterministic=True).numpy())
-    return np.concatenate(out) if out else np.zeros((0, 3), np.int64)
-
-
 def accuracy(policy: Any, demos: Demonstrations, idx: np.ndarray) -> dict[str, float]:
     """Per function the agent called at ``idx``: the share where the policy's most likely
     function is the same (``balanced``: their mean); ``point``: over the agent's calls with a
     point whose function the policy got right, the share of its points within :data:`NEAR`
     pixels."""
-    best, truth = most_likely(policy, demos, idx), demos.actions[idx]
+    best, truth = predictions(policy, demos, idx), demos.actions[idx]
     out = {name: float(np.mean(best[truth[:, 0] == i, 0] == i))
            for i, name in enumerate(PAPER_FUNCTIONS) if (truth[:, 0] == i).any()}
     out["balanced"] = float(np.mean(list(out.values()))) if out else float("nan")
@@ -177,28 +174,15 @@ def fit(policy: Any, demos: Demonstrations, train: np.ndarray, test: np.ndarray,
         lr: float, seed: int, balanced: bool) -> list[dict[str, float]]:
     """Maximum likelihood of the agent's actions under the masks; per epoch the mean negative
     log-likelihood and :func:`accuracy` (balanced, point) on both parts."""
-    params = [p for n, p in policy.named_parameters() if "value_net" not in n]
-    opt = torch.optim.Adam(params, lr=lr)
+    opt = policy_optimizer(policy, lr)
     rng = np.random.default_rng(seed)
-    n = len(PAPER_FUNCTIONS)
-    counts = np.bincount(demos.actions[train, 0], minlength=n).astype(float)
-    weight = np.where(counts > 0, len(train) / (n * np.maximum(counts, 1)), 0.0) \
-        if balanced else np.ones(n)
+    functions = demos.actions[:, 0]
+    weight = class_weights(functions, train, len(PAPER_FUNCTIONS), balanced)
     log = []
     for epoch in range(epochs):
-        losses = []
-        for part in np.array_split(rng.permutation(train), max(1, len(train) // 256)):
-            _, log_prob, _ = policy.evaluate_actions(
-                _batch(demos, part), torch.as_tensor(demos.actions[part]),
-                action_masks=demos.masks[part])
-            w = torch.as_tensor(weight[demos.actions[part, 0]], dtype=log_prob.dtype)
-            loss = -(w * log_prob).sum() / w.sum()
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-            losses.append(float(loss.detach()))
+        nll = likelihood_epoch(policy, opt, demos, train, weight, functions, rng)
         a, b = accuracy(policy, demos, train), accuracy(policy, demos, test)
-        row = {"epoch": epoch + 1, "nll": float(np.mean(losses)),
+        row = {"epoch": epoch + 1, "nll": nll,
                "train_balanced": a["balanced"], "held_out_balanced": b["balanced"],
                "train_point": a["point"], "held_out_point": b["point"]}
         log.append(row)
@@ -221,7 +205,7 @@ def dagger_episodes(model: Any, cfg: Any, r: int, episodes: int
         played[mode] += d.marines
         new = d if new is None else joined(new, d)
     assert new is not None
-    agree = float(np.mean(most_likely(model.policy, new, np.arange(len(new.actions)))[:, 0]
+    agree = float(np.mean(predictions(model.policy, new, np.arange(len(new.actions)))[:, 0]
                           == new.actions[:, 0]))
     return new, played, agree
 

@@ -102,6 +102,8 @@ RECT_HALF = 4
 _F = actions.FUNCTIONS
 NO_OP = _F.no_op()
 _PAPER_IDS = tuple(int(_F[name].id) for name in PAPER_FUNCTIONS)
+_PAPER_NO_OP = PAPER_FUNCTIONS.index("no_op")
+"""What an unavailable paper action is sent as (and timed as, with ``history``)."""
 
 _FIXED_ARGS: dict[str, list[int]] = {
     "queued": [0],            # now, not shift-queued
@@ -207,17 +209,11 @@ class BuildMarinesGym(gym.Env[dict[str, np.ndarray], Any]):
         if self.kind == "paper":
             fn, x, y = (int(a) for a in np.asarray(action).reshape(3))
             name = PAPER_FUNCTIONS[fn]
+            self._clock.acted(_PAPER_NO_OP if invalid else fn, self._loop())
+            reward += self._send(NO_OP if invalid else paper_call(fn, x, y))
         else:
             name = MACROS[int(action)]
-        if invalid:
-            if self.kind == "paper":
-                self._clock.acted(PAPER_FUNCTIONS.index("no_op"), self._loop())
-            reward += self._send(NO_OP)
-        elif self.kind == "paper":
-            self._clock.acted(fn, self._loop())
-            reward += self._send(paper_call(fn, x, y))
-        else:
-            reward += self._play_macro(name)
+            reward += self._send(NO_OP) if invalid else self._play_macro(name)
         if self.merge_waits:
             reward += self._wait_while_forced()
         info = {"game_reward": reward, "env_steps": len(self.frames) - 1, "invalid": invalid,

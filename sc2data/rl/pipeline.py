@@ -34,9 +34,13 @@ from sc2data.rl.vector import spans
 
 
 def masked_kl(p: Any, q: Any) -> th.Tensor:
-    """KL(p ‖ q) per sample between two masked categorical distributions of one action space
-    (sb3-contrib's; a multi-categorical sums over its heads). Actions the mask rules out have
+    """KL(p ‖ q) per sample between two masked distributions of one action space: sb3-contrib's
+    categoricals (a multi-categorical sums over its heads), or the paper policy's joint
+    function-and-point distribution (its own ``kl``). Actions the mask rules out have
     probability 0 under both and add nothing."""
+    joint = getattr(p, "kl", None)
+    if joint is not None:
+        return joint(q)  # type: ignore[no-any-return]
     ps = getattr(p, "distributions", None) or [p.distribution]
     qs = getattr(q, "distributions", None) or [q.distribution]
     total = th.zeros(ps[0].probs.shape[0], device=ps[0].probs.device)

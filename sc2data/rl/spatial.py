@@ -120,6 +120,21 @@ class PointDistribution:
         p_point = p[:, [PAPER_FUNCTIONS.index(n) for n in POINT_FUNCTIONS]].detach()
         return h_f + (p_point * h_point).sum(1)
 
+    def kl(self, other: PointDistribution) -> torch.Tensor:
+        """KL(self ‖ other) per row, of the joint distribution of ``(function, x, y)``:
+        ``KL(π(f)) + Σ_f π(f) KL(π(x, y | f))`` over the functions that take a point (the
+        pixel's share of its cell cancels). A function masked here has π(f) = 0 and adds
+        nothing; ``other`` must allow every function this one does."""
+        lp, lq = self._function_log_probs(), other._function_log_probs()
+        p = lp.exp()
+        on = p > 0
+        total = torch.where(on, p * (lp - lq), torch.zeros_like(p)).sum(1)
+        mp = F.log_softmax(self.point_logits, dim=2)
+        mq = F.log_softmax(other.point_logits, dim=2)
+        point_kl = (mp.exp() * (mp - mq)).sum(2)  # (B, point functions)
+        p_point = p[:, [PAPER_FUNCTIONS.index(n) for n in POINT_FUNCTIONS]]
+        return total + (p_point * point_kl).sum(1)
+
     def get_actions(self, deterministic: bool = False) -> torch.Tensor:
         c = self.cell
         if deterministic:  # the most likely function, its most likely cell, the cell's centre

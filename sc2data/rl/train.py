@@ -213,8 +213,8 @@ class RLConfig:
     kickstart: str | None = None
     """Keep the policy near this trained run's (a teacher of the same action space and
     observation, e.g. a clone of the macro-rules agent): after each PPO update, one pass over
-    the rollout lowering --kickstart-coef × KL(teacher ‖ policy) on its states (the independent
-    policy)."""
+    the rollout lowering --kickstart-coef × KL(teacher ‖ policy) on its states (the teacher's
+    policy of the run's kind: independent, or the paper space's spatial one)."""
     # Kickstarting (Schmitt et al. 2018) as a phase of its own after PPO's epochs, as PPG's
     # auxiliary phase (Cobbe et al. 2020): sc2data.rl.pipeline.PipelinedPPO.train. The
     # teacher's checkpoint is recorded by content (inputs.kickstart_sha256): a resume needs the
@@ -329,9 +329,6 @@ def check_values(cfg: RLConfig) -> None:
                            "policy chooses its sites)")
     if cfg.shaping != "event" and cfg.reward not in ("rules", "narration"):
         raise Sc2DataError(f"--shaping {cfg.shaping} goes with --reward rules or narration")
-    if cfg.kickstart is not None and resolved_policy(cfg) != "independent":
-        raise Sc2DataError("--kickstart goes with the independent policy (the macro space, or "
-                           "--policy independent in the paper space)")
 
 
 DEVICES: tuple[str, ...] = ("auto", "cpu", "cuda")
@@ -536,7 +533,7 @@ def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path
                    "the run's action space, observation and network")
     if cfg.kickstart is not None:
         check_init(cfg, cfg.kickstart, "--kickstart", TEACHER_MATCH, "a teacher needs the run's "
-                   "action space and observation, and the independent policy")
+                   "action space, observation and policy")
     if state["timesteps"] >= cfg.steps:
         print(f"{run} is already trained for {state['timesteps']} steps (--steps {cfg.steps})")
         return run
@@ -590,8 +587,7 @@ network may be another)."""
 def check_init(cfg: RLConfig, source: str, option: str, match: tuple[str, ...],
                need: str) -> None:
     """One line unless ``source`` is a trained run (checked by content) that fits this run:
-    the same ``match`` settings and the same policy (a teacher's is then the independent one:
-    :func:`check_values`). ``need`` ends the line."""
+    the same ``match`` settings and the same policy. ``need`` ends the line."""
     src = Path(source)
     init = load_config(src)
     odd = [(k.replace("_", "-"), getattr(init, k), getattr(cfg, k)) for k in match

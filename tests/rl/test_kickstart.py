@@ -31,6 +31,18 @@ def teacher(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return run
 
 
+@pytest.fixture(scope="module")
+def paper_teacher(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The same in pysc2's action space, with the spatial policy."""
+    from tests.cli import exit_code
+
+    run = tmp_path_factory.mktemp("rl") / "paper-teacher"
+    assert exit_code("rl", "train", "--out", run, *TINY, "--action-space", "paper",
+                     "--reward", "rules", "--learning-rate", "0.01", "--ent-coef", "0",
+                     "--seed", "7") == 0
+    return run
+
+
 def _kl_to(teacher: Path, run: Path) -> float:
     """Mean KL(teacher ‖ run's policy) over the states of a few random macro decisions."""
     from sc2data.rl.train import load_config, make_vec_env
@@ -48,7 +60,11 @@ def _kl_to(teacher: Path, run: Path) -> float:
                 o = {k: torch.as_tensor(v) for k, v in obs.items()}
                 kls.append(masked_kl(t.get_distribution(o, masks),
                                      s.get_distribution(o, masks)).mean().item())
-            acts = [rng.choice(np.flatnonzero(m)) for m in masks]
+            if cfg.action_space == "paper":  # an allowed function, anywhere on the screen
+                acts = [[rng.choice(np.flatnonzero(m[:-128])), *rng.integers(64, size=2)]
+                        for m in masks]
+            else:
+                acts = [rng.choice(np.flatnonzero(m)) for m in masks]
             obs, *_ = vec.step(np.array(acts))
     finally:
         vec.close()
@@ -72,13 +88,48 @@ def test_masked_kl_by_hand() -> None:
     assert masked_kl(p, p).item() == pytest.approx(0.0, abs=1e-7)
 
 
+def test_the_spatial_kl_sums_over_every_function_and_pixel() -> None:
+    """The paper policy's joint KL against Σ_a p(a) log p(a)/q(a) over every (function, x, y)
+    by enumeration (a point function's 4,096 pixels, another function once), with one function
+    masked in both."""
+    from sc2data.rl.envs import PAPER_FUNCTIONS
+    from sc2data.rl.spatial import POINT_FUNCTIONS, PointDistribution
+
+    g = torch.Generator().manual_seed(1)
+    n, side = len(PAPER_FUNCTIONS), 4
+    logits = [(torch.randn(1, n, generator=g), torch.randn(1, len(POINT_FUNCTIONS), side * side,
+                                                          generator=g)) for _ in range(2)]
+    mask = np.ones((1, n + 128), dtype=bool)
+    mask[0, PAPER_FUNCTIONS.index("Train_Marine_quick")] = False
+    acts = [(f, x, y) for f, name in enumerate(PAPER_FUNCTIONS) if name != "Train_Marine_quick"
+            for x, y in ([(x, y) for x in range(64) for y in range(64)]
+                         if name in POINT_FUNCTIONS else [(0, 0)])]
+    a = torch.tensor(acts)
+    log = []
+    for fn, pts in logits:
+        d = PointDistribution(fn.expand(len(a), -1), pts.expand(len(a), -1, -1))
+        d.apply_masking(np.repeat(mask, len(a), axis=0))
+        log.append(d.log_prob(a))
+    lp, lq = log
+    assert torch.logsumexp(lp, 0).item() == pytest.approx(0.0, abs=1e-4)  # every action once
+    want = (lp.exp() * (lp - lq)).sum().item()
+    p, q = (PointDistribution(fn, pts) for fn, pts in logits)
+    for d in (p, q):
+        d.apply_masking(mask)
+    assert masked_kl(p, q).item() == pytest.approx(want, rel=1e-4)
+    assert masked_kl(p, p).item() == pytest.approx(0.0, abs=1e-6)
+
+
+@pytest.mark.parametrize("space", ["macro", "paper"])
 def test_a_kickstarted_run_ends_nearer_its_teacher(
-        teacher: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+        space: str, request: pytest.FixtureRequest, tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
     """The same seed and settings with and without --kickstart: the kickstarted policy ends
     several times nearer the teacher's, logs the KL of each pass, and records the teacher by
-    path and content."""
+    path and content — the macro space's independent policy and the paper space's spatial one."""
+    teacher = request.getfixturevalue("teacher" if space == "macro" else "paper_teacher")
     kicked, plain = tmp_path / "kicked", tmp_path / "plain"
-    common = [*TINY, "--seed", "3", "--learning-rate", "0.003"]
+    common = [*TINY, "--seed", "3", "--learning-rate", "0.003", "--action-space", space]
     for run, extra in ((kicked, ["--kickstart", teacher, "--kickstart-coef", "5"]),
                        (plain, [])):
         code, _, err = run_cli(["rl", "train", "--out", run, *common, *extra], capsys)
@@ -117,7 +168,7 @@ def test_a_kickstarted_run_resumes_with_its_teacher_only(
             (["--kickstart", tmp_path / "nothing"], ("--kickstart", "not a trained")),
             (["--kickstart", teacher, "--history"], ("--history False", "a teacher needs")),
             (["--kickstart", teacher, "--action-space", "paper"],
-             ("--kickstart", "independent policy")),
+             ("--action-space macro", "a teacher needs")),
             (["--kickstart", teacher, "--kickstart-coef", "0"], ("--kickstart-coef",))):
         out_dir = tmp_path / "bad"
         code, _, err = run_cli(["rl", "train", "--out", out_dir, *TINY, *extra], capsys)

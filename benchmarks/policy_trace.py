@@ -1,10 +1,13 @@
-"""One evaluation episode of a trained macro-space ``sc2data rl`` run, decision by decision: what
-the policy was offered, how likely it made each allowed action, what it chose, and the state.
+"""One evaluation episode of a trained ``sc2data rl`` run, decision by decision: what the policy
+was offered, how likely it made each allowed action, what it chose, and the state.
 
 A diagnostic for "why does argmax play make nothing": a policy whose probabilities barely move
 with the state plays one action again and again under argmax, however well its sampled mix
 scores (BENCHMARKS.md, "Far sites, 10 seeds: the sparse learner, and why argmax play makes
-0").
+0"). In the paper space a line shows the three most likely functions, the chosen point and
+what the full-resolution screen holds there (a click one pixel off its target fails, and argmax
+play sends it again: BENCHMARKS.md, "PPO held near the scripted agent's clone"); the episode
+ends with the longest run of one repeated call.
 
     python benchmarks/policy_trace.py RUN                 # argmax, the first evaluation episode
     python benchmarks/policy_trace.py RUN --sampled --episode 3 --every 5
@@ -14,15 +17,17 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
 
 from sc2data._pysc2 import features
 from sc2data.rl import evaluate as ev
-from sc2data.rl.envs import MACROS
+from sc2data.rl.envs import MACROS, PAPER_FUNCTIONS
 
 _P = features.Player
+_UNIT_TYPE = features.SCREEN_FEATURES.unit_type.index
 
 
 def state_dependence(by_mask: dict[tuple[bool, ...], list[np.ndarray]]) -> float:
@@ -52,10 +57,9 @@ def main() -> None:
     _, model, env = ev._PLAYER
     seeds, sides = ev.eval_seeds(max(10, a.episode + 1))  # rl evaluate's episodes
     seed = seeds[a.episode]
+    if env.kind == "paper":
+        return paper_trace(model, env, seed, sides[a.episode], a)
     names = MACROS
-    if env.kind != "macro":
-        raise SystemExit("policy_trace.py: macro-space runs only (a paper-space decision is a "
-                         "function and a point, not one distribution)")
     model.set_random_seed(seed)
     obs, _ = env.reset(seed=seed)
     print(f"{a.run}: episode seed {seed} ({sides[a.episode]} start), "
@@ -92,6 +96,65 @@ def main() -> None:
     print(f"state dependence: {state_dependence(by_mask):.3f} (mean total variation between a "
           f"decision's distribution and the mean of the decisions offered the same actions; "
           f"0: the probabilities follow the mask alone)")
+    ev._close_player()
+
+
+def longest_repeat(calls: list[tuple[int, int, int]]) -> tuple[int, int]:
+    """The length of the longest run of one call sent again and again, and where it began."""
+    best, start, run = (0, 0), 0, 0
+    for i, call in enumerate(calls):
+        run = run + 1 if i and call == calls[i - 1] else 1
+        if run == 1:
+            start = i
+        if run > best[0]:
+            best = (run, start)
+    return best
+
+
+def paper_trace(model: Any, env: Any, seed: int, side: str, a: argparse.Namespace) -> None:
+    """The paper space's trace: function probabilities, the chosen point and the unit there."""
+    from sc2data.rl.spatial import POINT_FUNCTIONS
+
+    model.set_random_seed(seed)
+    obs, _ = env.reset(seed=seed)
+    print(f"{a.run}: episode seed {seed} ({side} start), {'sampled' if a.sampled else 'argmax'}")
+    print("decision  loop  minerals  supply   workers idle  chose                      at "
+          "(unit type)   most likely functions")
+    done, i, info = False, 0, {}
+    calls: list[tuple[int, int, int]] = []
+    while not done:
+        mask = env.action_masks()
+        with torch.no_grad():
+            o, _ = model.policy.obs_to_tensor(obs)
+            dist = model.policy.get_distribution(o, action_masks=mask[None])
+            probs = torch.softmax(dist.function_logits, 1).numpy()[0]
+        action, _ = model.predict(obs, deterministic=not a.sampled,
+                                  action_masks=mask)
+        f, x, y = (int(v) for v in np.asarray(action).reshape(-1)[:3])
+        name = PAPER_FUNCTIONS[f]
+        takes = name in POINT_FUNCTIONS
+        calls.append((f, x, y) if takes else (f, -1, -1))
+        ts = env.timestep
+        player = ts.observation["player"]
+        if i % a.every == 0:
+            where = ""
+            if takes:
+                unit = int(np.asarray(ts.observation["feature_screen"][_UNIT_TYPE])[y, x])
+                where = f"({x:2d}, {y:2d}) {unit:4d}"
+            top = np.argsort(probs)[::-1][:3]
+            shown = " ".join(f"{PAPER_FUNCTIONS[j]}={probs[j]:.2f}" for j in top)
+            print(f"{i:8d} {int(ts.observation['game_loop'][0]):5d} "
+                  f"{int(player[_P.minerals]):9d} {int(player[_P.food_used]):4d}/"
+                  f"{int(player[_P.food_cap]):<4d} {int(player[_P.food_workers]):7d} "
+                  f"{int(player[_P.idle_worker_count]):4d}  {name:26s} {where:17s} {shown}")
+        obs, _, terminated, truncated, info = env.step(action)
+        done = terminated or truncated
+        i += 1
+    length, start = longest_repeat(calls)
+    f, x, y = calls[start]
+    print(f"marines {info['marines']}, {i} decisions; the longest run of one call: {length} "
+          f"decisions of {PAPER_FUNCTIONS[f]}" + (f" at ({x}, {y})" if x >= 0 else "")
+          + f" from decision {start}")
     ev._close_player()
 
 

@@ -84,10 +84,7 @@ def main() -> None:
         if i % a.every == 0:
             chose = names[int(np.asarray(action).reshape(-1)[0])]
             shown = " ".join(f"{n}={q:.2f}" for n, q, ok in zip(names, probs, allowed) if ok)
-            print(f"{i:8d} {int(env.frames[-1]['game_loop'][0]):5d} "
-                  f"{int(player[_P.minerals]):9d} {int(player[_P.food_used]):4d}/"
-                  f"{int(player[_P.food_cap]):<4d} {int(player[_P.food_workers]):7d} "
-                  f"{int(player[_P.idle_worker_count]):4d}  {chose:19s} {shown}")
+            print(f"{state(i, env.frames[-1]['game_loop'], player)}  {chose:19s} {shown}")
         obs, _, terminated, truncated, info = env.step(action)
         done = terminated or truncated
         i += 1
@@ -97,6 +94,13 @@ def main() -> None:
           f"decision's distribution and the mean of the decisions offered the same actions; "
           f"0: the probabilities follow the mask alone)")
     ev._close_player()
+
+
+def state(i: int, game_loop: Any, player: Any) -> str:
+    """A trace line's first columns: decision, game loop, minerals, supply, workers, idle."""
+    return (f"{i:8d} {int(game_loop[0]):5d} {int(player[_P.minerals]):9d} "
+            f"{int(player[_P.food_used]):4d}/{int(player[_P.food_cap]):<4d} "
+            f"{int(player[_P.food_workers]):7d} {int(player[_P.idle_worker_count]):4d}")
 
 
 def longest_repeat(calls: list[tuple[int, int, int]]) -> tuple[int, int]:
@@ -143,10 +147,8 @@ def paper_trace(model: Any, env: Any, seed: int, side: str, a: argparse.Namespac
                 where = f"({x:2d}, {y:2d}) {unit:4d}"
             top = np.argsort(probs)[::-1][:3]
             shown = " ".join(f"{PAPER_FUNCTIONS[j]}={probs[j]:.2f}" for j in top)
-            print(f"{i:8d} {int(ts.observation['game_loop'][0]):5d} "
-                  f"{int(player[_P.minerals]):9d} {int(player[_P.food_used]):4d}/"
-                  f"{int(player[_P.food_cap]):<4d} {int(player[_P.food_workers]):7d} "
-                  f"{int(player[_P.idle_worker_count]):4d}  {name:26s} {where:17s} {shown}")
+            print(f"{state(i, ts.observation['game_loop'], player)}  {name:26s} {where:17s} "
+                  f"{shown}")
         obs, _, terminated, truncated, info = env.step(action)
         done = terminated or truncated
         i += 1

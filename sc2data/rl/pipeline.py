@@ -38,9 +38,10 @@ def masked_kl(p: Any, q: Any) -> th.Tensor:
     categoricals (a multi-categorical sums over its heads), or the paper policy's joint
     function-and-point distribution (its own ``kl``). Actions the mask rules out have
     probability 0 under both and add nothing."""
-    joint = getattr(p, "kl", None)
-    if joint is not None:
-        return joint(q)  # type: ignore[no-any-return]
+    from sc2data.rl.spatial import PointDistribution
+
+    if isinstance(p, PointDistribution):
+        return p.kl(q)
     ps = getattr(p, "distributions", None) or [p.distribution]
     qs = getattr(q, "distributions", None) or [q.distribution]
     total = th.zeros(ps[0].probs.shape[0], device=ps[0].probs.device)

@@ -132,9 +132,8 @@ def paper_trace(model: Any, env: Any, seed: int, side: str, a: argparse.Namespac
             o, _ = model.policy.obs_to_tensor(obs)
             dist = model.policy.get_distribution(o, action_masks=mask[None])
             probs = torch.softmax(dist.function_logits, 1).numpy()[0]
-        action, _ = model.predict(obs, deterministic=not a.sampled,
-                                  action_masks=mask)
-        f, x, y = (int(v) for v in np.asarray(action).reshape(-1)[:3])
+            action = dist.get_actions(deterministic=not a.sampled).numpy()[0]  # as predict
+        f, x, y = (int(v) for v in action)
         name = PAPER_FUNCTIONS[f]
         takes = name in POINT_FUNCTIONS
         calls.append((f, x, y) if takes else (f, -1, -1))

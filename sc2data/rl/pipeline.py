@@ -30,6 +30,7 @@ from sb3_contrib import MaskablePPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.utils import obs_as_tensor
 
+from sc2data.rl.spatial import PointDistribution
 from sc2data.rl.vector import spans
 
 
@@ -38,8 +39,6 @@ def masked_kl(p: Any, q: Any) -> th.Tensor:
     categoricals (a multi-categorical sums over its heads), or the paper policy's joint
     function-and-point distribution (its own ``kl``). Actions the mask rules out have
     probability 0 under both and add nothing."""
-    from sc2data.rl.spatial import PointDistribution
-
     if isinstance(p, PointDistribution):
         return p.kl(q)
     ps = getattr(p, "distributions", None) or [p.distribution]

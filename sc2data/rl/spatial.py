@@ -45,6 +45,8 @@ POINT_FUNCTIONS: tuple[str, ...] = ("select_point", "select_rect", "Build_Supply
 
 _N = SCREEN_SIZE
 _COARSE = 8
+_POINT_COLUMNS = [PAPER_FUNCTIONS.index(n) for n in POINT_FUNCTIONS]
+"""The columns of the function logits whose function takes a point, in POINT_FUNCTIONS' order."""
 
 
 def sample(logits: torch.Tensor) -> torch.Tensor:
@@ -117,7 +119,7 @@ class PointDistribution:
         # Differentiated through π(f), Σ π(f)·H(x, y | f) pays the policy for choosing the
         # functions that take a point (their 4,096 pixels' entropy), whatever the reward:
         # a zero-reward control drifted to them (tests/rl/test_control.py).
-        p_point = p[:, [PAPER_FUNCTIONS.index(n) for n in POINT_FUNCTIONS]].detach()
+        p_point = p[:, _POINT_COLUMNS].detach()
         return h_f + (p_point * h_point).sum(1)
 
     def kl(self, other: PointDistribution) -> torch.Tensor:
@@ -132,7 +134,7 @@ class PointDistribution:
         mp = F.log_softmax(self.point_logits, dim=2)
         mq = F.log_softmax(other.point_logits, dim=2)
         point_kl = (mp.exp() * (mp - mq)).sum(2)  # (B, point functions)
-        p_point = p[:, [PAPER_FUNCTIONS.index(n) for n in POINT_FUNCTIONS]]
+        p_point = p[:, _POINT_COLUMNS]
         return total + (p_point * point_kl).sum(1)
 
     def get_actions(self, deterministic: bool = False) -> torch.Tensor:

@@ -221,6 +221,8 @@ def clone(cfg: Any, demos: Demonstrations, train: np.ndarray, test: np.ndarray,
     vec = make_vec_env(cfg)
     try:
         model = new_model(cfg, vec, cfg.seed)
+        if args.init is not None:
+            start_from_clone(model, args.init, vec)
         before = measure(model.policy, demos, test)
         print(f"the untrained policy, held out: {before}", flush=True)
         log = fit_first(model.policy, demos, train, test, args.epochs, args.lr, cfg.seed,
@@ -239,6 +241,21 @@ def clone(cfg: Any, demos: Demonstrations, train: np.ndarray, test: np.ndarray,
     return model, demos, before, after, log, rounds
 
 
+def start_from_clone(model: Any, src: Path, vec: Any) -> None:
+    """Give ``model`` the policy of the trained run ``src``. A spatial policy with the ``cell``
+    point head fits one with the ``pixel`` head: the within-cell convolution, which it lacks,
+    starts at zero, so the model starts as exactly ``src``'s policy."""
+    state = runs.load_model(src, vec, "cpu").policy.state_dict()
+    missing, unexpected = model.policy.load_state_dict(state, strict=False)
+    if unexpected or any(not k.startswith("within.") for k in missing):
+        raise SystemExit(f"--init {src}: its network does not fit the run's "
+                         f"(missing {missing}, unexpected {unexpected})")
+    if missing:
+        with torch.no_grad():
+            for k in missing:
+                model.policy.get_parameter(k).zero_()
+
+
 def add_options(ap: argparse.ArgumentParser, *, epochs: int, lr: float, dagger_episodes: int,
                 dagger_epochs: int, unit: str) -> None:
     """The options both cloning scripts take (``unit``: what ``--balanced`` weighs)."""
@@ -255,6 +272,8 @@ def add_options(ap: argparse.ArgumentParser, *, epochs: int, lr: float, dagger_e
     ap.add_argument("--dagger-epochs", type=int, default=dagger_epochs,
                     help="epochs of fitting a round")
     ap.add_argument("--dagger-lr", type=float, default=3e-4, help="Adam's step in the rounds")
+    ap.add_argument("--init", type=Path, default=None,
+                    help="start the fit from this run's policy (e.g. an earlier clone)")
 
 
 def checked_config(args: argparse.Namespace, prog: str, space: str, why: str) -> Any:

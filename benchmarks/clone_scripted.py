@@ -30,7 +30,11 @@ set and the fit goes on; the policy kept is the one whose round made the most ma
 
     python benchmarks/clone_scripted.py RUN --out OUT [--episodes 16] [--held-out 2]
         [--epochs 20] [--lr 1e-3] [--balanced] [--dagger 0] [--dagger-episodes 4]
-        [--dagger-epochs 5] [--dagger-lr 3e-4]
+        [--dagger-epochs 5] [--dagger-lr 3e-4] [--init CLONE]
+
+``--init CLONE`` starts the fit from an earlier clone's policy; a clone with the ``cell`` point
+head starts one with ``--point-head pixel`` (the run's setting) as exactly itself, its
+within-cell convolution at zero.
 """
 
 from __future__ import annotations
@@ -158,7 +162,7 @@ def accuracy(policy: Any, demos: Demonstrations, idx: np.ndarray) -> dict[str, f
     """Per function the agent called at ``idx``: the share where the policy's most likely
     function is the same (``balanced``: their mean); ``point``: over the agent's calls with a
     point whose function the policy got right, the share of its points within :data:`NEAR`
-    pixels."""
+    pixels (``point_exact``: on the agent's very pixel)."""
     best, truth = predictions(policy, demos, idx), demos.actions[idx]
     out = {name: float(np.mean(best[truth[:, 0] == i, 0] == i))
            for i, name in enumerate(PAPER_FUNCTIONS) if (truth[:, 0] == i).any()}
@@ -167,6 +171,8 @@ def accuracy(policy: Any, demos: Demonstrations, idx: np.ndarray) -> dict[str, f
     right = takes & (best[:, 0] == truth[:, 0])
     near = np.abs(best[:, 1:] - truth[:, 1:]).max(axis=1) <= NEAR
     out["point"] = float(np.mean(near[right])) if right.any() else float("nan")
+    exact = (best[:, 1:] == truth[:, 1:]).all(axis=1)
+    out["point_exact"] = float(np.mean(exact[right])) if right.any() else float("nan")
     return out
 
 

@@ -11,13 +11,21 @@ on several units ("click this SCV or that one"). :class:`PaperPolicy` does that,
   the observation's resolution (S×S cells of 64/S pixels): a *fine* term, a 1×1 convolution over
   the observation's channels (where SCVs, minerals, free ground are), plus a *coarse* one, a 1×1
   convolution over the trunk's 8×8 map plus a learnt 8×8 preference given the features,
-  upsampled to S×S. A pixel's probability is its cell's shared evenly by the cell's pixels (the
-  observation cannot tell them apart): at S = 32 the maps are a quarter of 64×64's cost;
+  upsampled to S×S. With the ``cell`` point head a pixel's probability is its cell's shared
+  evenly by the cell's pixels: at S = 32 the maps are a quarter of 64×64's cost. With ``pixel``
+  a 3×3 convolution over the observation gives each cell's 64/S × 64/S pixels a logit of their
+  own (the sub-pixel convolution of Shi et al. 2016: its (64/S)² channels rearranged into the
+  cell), added to the cell's, so the map is one logit per screen pixel: the cell cannot tell its
+  pixels apart, but its neighbours can ("the mineral field is to the left"), and the most likely
+  point is a pixel the policy chose, not a cell's centre (which was an SCV beside the mineral the
+  scripted agent clicks: BENCHMARKS.md, "PPO held near the scripted agent's clone"). With that
+  convolution's weights zero it is the ``cell`` head exactly;
 * :class:`PointDistribution`: ``log π(a) = log π(f) + [f takes a point] · log π(x, y | f)`` and
   entropy ``H(f) + Σ_f π(f) H(x, y | f)``: an argument the chosen function ignores counts in
   neither (the value is the joint entropy; its gradient holds π(f) fixed in the second term, so
   the bonus does not favour functions for having a point to spread). The most likely action is
-  the most likely function and, for it, the centre of its most likely cell.
+  the most likely function and, for it, the centre of its most likely cell (a pixel, with the
+  ``pixel`` head).
 
 The env's action stays ``MultiDiscrete([10, 64, 64])``: ``(function, x, y)``, x the column and y
 the row, as :func:`~sc2data.rl.envs.paper_call` reads it.
@@ -65,19 +73,31 @@ class PointDistribution:
     """The joint distribution of ``(function, x, y)`` (see the module docstring), with
     sb3-contrib's masked-distribution methods."""
 
-    def __init__(self, function_logits: torch.Tensor, point_logits: torch.Tensor) -> None:
+    def __init__(self, function_logits: torch.Tensor, point_logits: torch.Tensor,
+                 side: int | None = None) -> None:
         self.function_logits = function_logits
         """(B, functions)"""
         self.point_logits = point_logits
-        """(B, point functions, S·S): one logit per cell of 64/S × 64/S pixels"""
-        self.side = int(round(point_logits.shape[2] ** 0.5))
+        """(B, point functions, K): K = S·S, one logit per cell of 64/S × 64/S pixels (its
+        pixels share it evenly), or K = 64·64, one per pixel, ordered by the pixel's place in
+        its cell, then the cell: index ``(dy·c + dx)·S·S + cell`` (at S = 64: row-major)"""
+        self.side = side or int(round(point_logits.shape[2] ** 0.5))
+        """S: cells a side"""
         self.cell = _N // self.side
+        """c: pixels a cell's side"""
+        self.per_pixel = point_logits.shape[2] == _N * _N
+        """whether the maps have a logit per pixel (else per cell)"""
         n = function_logits.shape[1]
         slot = torch.full((n,), -1, dtype=torch.long)
         for j, name in enumerate(POINT_FUNCTIONS):
             slot[PAPER_FUNCTIONS.index(name)] = j
         self.slot = slot.to(function_logits.device)
         """function index → its point map, or -1"""
+
+    @property
+    def _share(self) -> float:
+        """log of the pixels sharing each entry of the maps (0 when each entry is a pixel)."""
+        return 0.0 if self.per_pixel else 2.0 * float(np.log(self.cell))
 
     def apply_masking(self, masks: Any) -> None:
         """Mask the functions (the first entries of sb3-contrib's per-dimension masks; the
@@ -103,10 +123,12 @@ class PointDistribution:
         a = actions.long().reshape(-1, 3)
         f, x, y = a[:, 0], a[:, 1], a[:, 2]
         lp = self._function_log_probs().gather(1, f[:, None]).squeeze(1)
-        c = self.cell
-        cell = (y // c) * self.side + x // c
-        point = F.log_softmax(self._point_map(f), dim=1).gather(1, cell[:, None]).squeeze(1)
-        point = point - 2.0 * float(np.log(c))  # a pixel's share of its cell
+        c, s = self.cell, self.side
+        entry = (y // c) * s + x // c
+        if self.per_pixel:
+            entry = entry + ((y % c) * c + x % c) * s * s
+        point = F.log_softmax(self._point_map(f), dim=1).gather(1, entry[:, None]).squeeze(1)
+        point = point - self._share  # a pixel's share of its entry
         return lp + point * (self.slot[f] >= 0)
 
     def entropy(self) -> torch.Tensor:
@@ -114,7 +136,7 @@ class PointDistribution:
         p = logp.exp()
         h_f = -(p * logp).sum(1)
         lq = F.log_softmax(self.point_logits, dim=2)
-        h_point = -(lq.exp() * lq).sum(2) + 2.0 * float(np.log(self.cell))  # (B, point funcs)
+        h_point = -(lq.exp() * lq).sum(2) + self._share  # (B, point functions)
         # π(f) held constant in the point term: each head's entropy regularises its own head.
         # Differentiated through π(f), Σ π(f)·H(x, y | f) pays the policy for choosing the
         # functions that take a point (their 4,096 pixels' entropy), whatever the reward:
@@ -138,17 +160,23 @@ class PointDistribution:
         return total + (p_point * point_kl).sum(1)
 
     def get_actions(self, deterministic: bool = False) -> torch.Tensor:
-        c = self.cell
-        if deterministic:  # the most likely function, its most likely cell, the cell's centre
+        c, s = self.cell, self.side
+        if deterministic:  # the most likely function and entry (a cell's centre, or a pixel)
             f = self.function_logits.argmax(1)
-            cell = self._point_map(f).argmax(1)
-            dx = dy = torch.full_like(cell, c // 2)
+            entry = self._point_map(f).argmax(1)
         else:
             f = sample(self.function_logits)
-            cell = sample(self._point_map(f))
+            entry = sample(self._point_map(f))
+        if self.per_pixel:
+            within, cell = entry // (s * s), entry % (s * s)
+            dy, dx = within // c, within % c
+        elif deterministic:
+            cell, dx, dy = entry, *(torch.full_like(entry, c // 2) for _ in range(2))
+        else:
+            cell = entry
             dx, dy = (torch.randint(c, cell.shape, device=cell.device) for _ in range(2))
-        x = (cell % self.side) * c + dx
-        y = (cell // self.side) * c + dy
+        x = (cell % s) * c + dx
+        y = (cell // s) * c + dy
         return torch.stack([f, x, y], dim=1)
 
 
@@ -157,10 +185,14 @@ class PaperPolicy(MaskableMultiInputActorCriticPolicy):
     docstring). Built with ``features_extractor_class=CompactExtractor``, whose trunk it reuses;
     SB3's MLP extractor is left empty."""
 
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
+    def __init__(self, *args: Any, point_head: str = "cell", **kwargs: Any) -> None:
         kwargs.setdefault("features_extractor_class", CompactExtractor)
         kwargs["net_arch"] = []
+        self.point_head = point_head
         super().__init__(*args, **kwargs)
+
+    def _get_constructor_parameters(self) -> dict[str, Any]:
+        return {**super()._get_constructor_parameters(), "point_head": self.point_head}
 
     def _build(self, lr_schedule: Any) -> None:
         self._build_mlp_extractor()
@@ -177,9 +209,15 @@ class PaperPolicy(MaskableMultiInputActorCriticPolicy):
         self.fine = nn.Linear(channels, n_pt)
         self.coarse = nn.Linear(32, n_pt)
         self.where = nn.Linear(fe.features_dim, n_pt * _COARSE * _COARSE)
+        c = _N // size
+        self.within = (nn.Conv2d(channels, n_pt * c * c, 3, padding=1)
+                       if self.point_head == "pixel" and c > 1 else None)
+        heads = [(fe, np.sqrt(2)), (self.action_net, 0.01), (self.value_net, 1.0),
+                 (self.fine, 0.01), (self.coarse, 0.01), (self.where, 0.01)]
+        if self.within is not None:
+            heads.append((self.within, 0.01))
         if self.ortho_init:
-            for module, gain in ((fe, np.sqrt(2)), (self.action_net, 0.01), (self.value_net, 1.0),
-                                 (self.fine, 0.01), (self.coarse, 0.01), (self.where, 0.01)):
+            for module, gain in heads:
                 module.apply(lambda m, g=gain: self.init_weights(m, gain=g))
         self.optimizer = self.optimizer_class(self.parameters(), lr=lr_schedule(1),
                                               **self.optimizer_kwargs)
@@ -196,9 +234,11 @@ class PaperPolicy(MaskableMultiInputActorCriticPolicy):
         coarse = (_pointwise(self.coarse, first)
                   + self.where(h).view(b, n_pt, _COARSE, _COARSE))  # (B, P, 8, 8)
         fine = _pointwise(self.fine, screen).view(b, n_pt, _COARSE, r, _COARSE, r)
-        points = fine + coarse[:, :, :, None, :, None]  # each coarse cell over its r×r cells
-        return PointDistribution(self.action_net(h), points.reshape(b, n_pt, s * s)), \
-            self.value_net(h)
+        points = (fine + coarse[:, :, :, None, :, None]).reshape(b, n_pt, 1, s * s)
+        if self.within is not None:  # each cell's logit over its c×c pixels, plus theirs
+            points = points + self.within(screen).view(b, n_pt, -1, s * s)
+        return (PointDistribution(self.action_net(h), points.flatten(2), s),
+                self.value_net(h))
 
     def forward(self, obs: Any, deterministic: bool = False,
                 action_masks: np.ndarray | None = None

@@ -145,6 +145,11 @@ class RLConfig:
     auto."""
     # spatial: sc2data.rl.spatial; auto: spatial for the paper space on the compact
     # observation, independent otherwise.
+    point_head: str = "cell"
+    """Spatial policy: cell (one logit per observation cell, shared by its pixels) or pixel
+    (and a 3×3 convolution weighing the pixels within each cell: the most likely point is a
+    pixel, not a cell's centre)."""
+    # sc2data.rl.spatial.PaperPolicy; the same at --obs-size 64, where a cell is a pixel.
     gamma: float = 0.99
     """PPO discount (per pysc2 step with --smdp)."""
     gae_lambda: float = 0.95
@@ -234,7 +239,7 @@ class RLConfig:
         "shaping": "event", "env_groups": 1, "merge_waits": False, "macro_sites": "random",
         "history": False, "share_features": True, "reward_scale": 1.0,
         "vf_coef": 0.5, "max_grad_norm": 0.5, "init_policy": None, "kickstart": None,
-        "kickstart_coef": 1.0}
+        "kickstart_coef": 1.0, "point_head": "cell"}
     """Settings added since runs were first written, as those runs had them: a run folder whose
     ``config.json`` lacks one was trained so."""
 
@@ -303,6 +308,12 @@ def check_values(cfg: RLConfig) -> None:
         raise Sc2DataError(f"unknown policy {cfg.policy!r}; choose one of: {', '.join(POLICIES)}")
     if cfg.policy == "spatial" and (cfg.action_space != "paper" or cfg.obs != "compact"):
         raise Sc2DataError("--policy spatial needs --action-space paper and --obs compact")
+    if cfg.point_head not in POINT_HEADS:
+        raise Sc2DataError(f"unknown point head {cfg.point_head!r}; choose one of: "
+                           f"{', '.join(POINT_HEADS)}")
+    if cfg.point_head != "cell" and resolved_policy(cfg) != "spatial":
+        raise Sc2DataError(f"--point-head {cfg.point_head} goes with the spatial policy "
+                           "(--action-space paper --obs compact)")
     if not cfg.share_features and resolved_policy(cfg) == "spatial":
         raise Sc2DataError("--no-share-features goes with --policy independent (the spatial "
                            "policy's point head reads the shared trunk's map)")
@@ -433,6 +444,7 @@ def new_model(cfg: RLConfig, vec: Any, seed: int, device: str = "cpu") -> Any:
 
 
 POLICIES: tuple[str, ...] = ("auto", "spatial", "independent")
+POINT_HEADS: tuple[str, ...] = ("cell", "pixel")
 
 
 def resolved_policy(cfg: RLConfig) -> str:
@@ -456,7 +468,9 @@ def policy_kwargs(cfg: RLConfig) -> dict[str, Any]:
     from sc2data.rl.obs import Observer
     from sc2data.rl.policy import CompactExtractor, StateExtractor
 
-    share = {} if cfg.share_features else {"share_features_extractor": False}
+    share: dict[str, Any] = {} if cfg.share_features else {"share_features_extractor": False}
+    if resolved_policy(cfg) == "spatial" and cfg.point_head != "cell":
+        share["point_head"] = cfg.point_head
     if cfg.obs == "stored":
         return {"features_extractor_class": StateExtractor, **share}
     return {"features_extractor_class": CompactExtractor,
@@ -576,7 +590,7 @@ def _train_locked(cfg: RLConfig, run: Path, narration: Any, scorer: Any) -> Path
 
 
 INIT_MATCH: tuple[str, ...] = ("action_space", "obs", "obs_size", "minimap", "history",
-                               "layers", "share_features")
+                               "layers", "point_head", "share_features")
 """Settings a starting policy (``--init-policy``) must share with the run: they shape its
 inputs, outputs and network."""
 TEACHER_MATCH: tuple[str, ...] = INIT_MATCH[:-1]

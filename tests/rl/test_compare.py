@@ -304,9 +304,10 @@ def test_runs_written_before_merged_waits_and_sites_read_as_they_were_trained(
     assert load_config(run).merge_waits is True  # new runs merge the forced waits
     assert load_config(run).macro_sites == "far"
     config = json.loads((run / "config.json").read_text())
-    del config["merge_waits"], config["macro_sites"]
+    del config["merge_waits"], config["macro_sites"], config["point_head"]
     _write_json(run / "config.json", config)
     assert load_config(run).merge_waits is False and load_config(run).macro_sites == "random"
+    assert load_config(run).point_head == "cell"
 
 
 def test_shaping_defaults_to_the_experiments_choice_per_reward(tmp_path: Path) -> None:

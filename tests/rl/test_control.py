@@ -145,9 +145,57 @@ def test_masked_functions_get_no_mass_and_argmax_follows_the_maps() -> None:
         assert int(d.get_actions()[0, 0]) in (build, PAPER_FUNCTIONS.index("no_op"))
 
 
-def test_the_spatial_policy_plays_masked_calls_only(tmp_path: Path) -> None:
+def test_the_pixel_head_is_the_cell_head_plus_a_choice_within_the_cell(tmp_path: Path) -> None:
+    """``--point-head pixel`` at a 32×32 observation: one logit per screen pixel; with its
+    within-cell convolution at zero it is the ``cell`` head of the same weights exactly (log
+    probabilities, entropy); its bias alone moves the most likely point within the cell."""
+    base = dict(action_space="paper", envs=1, processes=0, episode_steps=30)
+    runs = {}
+    for head in ("cell", "pixel"):
+        cfg = RLConfig(out=str(tmp_path / head), point_head=head, **base)  # type: ignore[arg-type]
+        vec = make_vec_env(cfg)
+        runs[head] = (new_model(cfg, vec, 0).policy, vec)
+    cell, pixel = runs["cell"][0], runs["pixel"][0]
+    try:
+        assert pixel.within is not None and cell.within is None
+        state = {k: v for k, v in pixel.state_dict().items() if not k.startswith("within.")}
+        cell.load_state_dict(state)
+        with torch.no_grad():
+            pixel.within.weight.zero_()
+            pixel.within.bias.zero_()
+        vec = runs["cell"][1]
+        vec.seed(0)
+        obs = cell.obs_to_tensor(vec.reset())[0]
+        dc, dp = cell.get_distribution(obs), pixel.get_distribution(obs)
+        assert dp.point_logits.shape[2] == 64 * 64 and dc.point_logits.shape[2] == 32 * 32
+        f = PAPER_FUNCTIONS.index("Harvest_Gather_screen")
+        acts = torch.tensor([[f, 10, 21], [f, 11, 21], [f, 63, 0],
+                             [PAPER_FUNCTIONS.index("no_op"), 0, 0]])
+        for a in acts:
+            assert torch.allclose(dp.log_prob(a[None]), dc.log_prob(a[None]), atol=1e-5)
+        assert torch.allclose(dp.entropy(), dc.entropy(), atol=1e-5)
+        # A bias for the left column's lower pixel (dy 1, dx 0) of every Harvest cell.
+        c2 = 4
+        with torch.no_grad():
+            pixel.within.bias[POINT_FUNCTIONS.index("Harvest_Gather_screen") * c2 + 2] = 5.0
+            dp = pixel.get_distribution(obs)
+            dp.function_logits[0, f] = 100.0
+        _, x, y = (int(v) for v in dp.get_actions(deterministic=True)[0])
+        assert x % 2 == 0 and y % 2 == 1
+        best = int(dc.point_logits[0, POINT_FUNCTIONS.index("Harvest_Gather_screen")].argmax())
+        assert (y // 2, x // 2) == divmod(best, 32)  # in the cell head's most likely cell
+        for dx, dy in ((0, 0), (1, 0), (1, 1)):  # the cell's other three pixels: less likely
+            other = dp.log_prob(torch.tensor([[f, x - x % 2 + dx, y - y % 2 + dy]]))
+            assert float(other) < float(dp.log_prob(torch.tensor([[f, x, y]]))) - 4.0
+    finally:
+        for _, v in runs.values():
+            v.close()
+
+
+@pytest.mark.parametrize("head", ["cell", "pixel"])
+def test_the_spatial_policy_plays_masked_calls_only(tmp_path: Path, head: str) -> None:
     cfg = RLConfig(out=str(tmp_path / "r"), action_space="paper", envs=2, processes=0,
-                   episode_steps=30)
+                   episode_steps=30, point_head=head)
     vec = make_vec_env(cfg)
     try:
         model = new_model(cfg, vec, 0)

@@ -243,11 +243,11 @@ def clone(cfg: Any, demos: Demonstrations, train: np.ndarray, test: np.ndarray,
 
 def start_from_clone(model: Any, src: Path, vec: Any) -> None:
     """Give ``model`` the policy of the trained run ``src``. A spatial policy with the ``cell``
-    point head fits one with the ``pixel`` head: the within-cell convolution, which it lacks,
-    starts at zero, so the model starts as exactly ``src``'s policy."""
+    point head fits one with the ``pixel`` head: what it lacks (the within-cell convolution and
+    the pixels' preferences) starts at zero, so the model starts as exactly ``src``'s policy."""
     state = runs.load_model(src, vec, "cpu").policy.state_dict()
     missing, unexpected = model.policy.load_state_dict(state, strict=False)
-    if unexpected or any(not k.startswith("within.") for k in missing):
+    if unexpected or any(not k.startswith(("within.", "place")) for k in missing):
         raise SystemExit(f"--init {src}: its network does not fit the run's "
                          f"(missing {missing}, unexpected {unexpected})")
     if missing:

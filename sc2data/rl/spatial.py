@@ -18,8 +18,11 @@ on several units ("click this SCV or that one"). :class:`PaperPolicy` does that,
   cell), added to the cell's, so the map is one logit per screen pixel: the cell cannot tell its
   pixels apart, but its neighbours can ("the mineral field is to the left"), and the most likely
   point is a pixel the policy chose, not a cell's centre (which was an SCV beside the mineral the
-  scripted agent clicks: BENCHMARKS.md, "PPO held near the scripted agent's clone"). With that
-  convolution's weights zero it is the ``cell`` head exactly;
+  scripted agent clicks: BENCHMARKS.md, "PPO held near the scripted agent's clone"). The
+  ``pixel`` head also learns a preference of its own for every pixel per function (at any S): the
+  other terms see what is under a pixel, not where it is, so free ground ties and the first such
+  pixel, on the screen's top edge, was the most likely depot site. With the convolution and the
+  preferences zero it is the ``cell`` head exactly;
 * :class:`PointDistribution`: ``log π(a) = log π(f) + [f takes a point] · log π(x, y | f)`` and
   entropy ``H(f) + Σ_f π(f) H(x, y | f)``: an argument the chosen function ignores counts in
   neither (the value is the joint entropy; its gradient holds π(f) fixed in the second term, so
@@ -210,8 +213,12 @@ class PaperPolicy(MaskableMultiInputActorCriticPolicy):
         self.coarse = nn.Linear(32, n_pt)
         self.where = nn.Linear(fe.features_dim, n_pt * _COARSE * _COARSE)
         c = _N // size
-        self.within = (nn.Conv2d(channels, n_pt * c * c, 3, padding=1)
-                       if self.point_head == "pixel" and c > 1 else None)
+        pixel = self.point_head == "pixel"
+        self.within = nn.Conv2d(channels, n_pt * c * c, 3, padding=1) if pixel and c > 1 else None
+        # Every pixel's learnt preference per function, as the sub-pixel maps are laid out (see
+        # PointDistribution.point_logits). Zero: the cell head. Without it free ground ties, and
+        # argmax took the first such pixel, on the screen's top edge, where a depot never fits.
+        self.place = nn.Parameter(torch.zeros(n_pt, c * c, size * size)) if pixel else None
         heads = [(fe, np.sqrt(2)), (self.action_net, 0.01), (self.value_net, 1.0),
                  (self.fine, 0.01), (self.coarse, 0.01), (self.where, 0.01)]
         if self.within is not None:
@@ -237,6 +244,8 @@ class PaperPolicy(MaskableMultiInputActorCriticPolicy):
         points = (fine + coarse[:, :, :, None, :, None]).reshape(b, n_pt, 1, s * s)
         if self.within is not None:  # each cell's logit over its c×c pixels, plus theirs
             points = points + self.within(screen).view(b, n_pt, -1, s * s)
+        if self.place is not None:
+            points = points + self.place
         return (PointDistribution(self.action_net(h), points.flatten(2), s),
                 self.value_net(h))
 

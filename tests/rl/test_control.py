@@ -147,8 +147,9 @@ def test_masked_functions_get_no_mass_and_argmax_follows_the_maps() -> None:
 
 def test_the_pixel_head_is_the_cell_head_plus_a_choice_within_the_cell(tmp_path: Path) -> None:
     """``--point-head pixel`` at a 32×32 observation: one logit per screen pixel; with its
-    within-cell convolution at zero it is the ``cell`` head of the same weights exactly (log
-    probabilities, entropy); its bias alone moves the most likely point within the cell."""
+    within-cell convolution and pixel preferences at zero (the preferences start so) it is the
+    ``cell`` head of the same weights exactly (log probabilities, entropy); the convolution's
+    bias alone moves the most likely point within the cell, a preference across cells."""
     base = dict(action_space="paper", envs=1, processes=0, episode_steps=30)
     runs = {}
     for head in ("cell", "pixel"):
@@ -158,7 +159,8 @@ def test_the_pixel_head_is_the_cell_head_plus_a_choice_within_the_cell(tmp_path:
     cell, pixel = runs["cell"][0], runs["pixel"][0]
     try:
         assert pixel.within is not None and cell.within is None
-        state = {k: v for k, v in pixel.state_dict().items() if not k.startswith("within.")}
+        state = {k: v for k, v in pixel.state_dict().items()
+                 if not k.startswith(("within.", "place"))}
         cell.load_state_dict(state)
         with torch.no_grad():
             pixel.within.weight.zero_()
@@ -187,6 +189,11 @@ def test_the_pixel_head_is_the_cell_head_plus_a_choice_within_the_cell(tmp_path:
         for dx, dy in ((0, 0), (1, 0), (1, 1)):  # the cell's other three pixels: less likely
             other = dp.log_prob(torch.tensor([[f, x - x % 2 + dx, y - y % 2 + dy]]))
             assert float(other) < float(dp.log_prob(torch.tensor([[f, x, y]]))) - 4.0
+        with torch.no_grad():  # a preference for pixel (45, 50): (dy 0, dx 1) of cell (22, 25)
+            pixel.place[POINT_FUNCTIONS.index("Harvest_Gather_screen"), 1, 25 * 32 + 22] = 50.0
+            dp = pixel.get_distribution(obs)
+            dp.function_logits[0, f] = 100.0
+        assert dp.get_actions(deterministic=True)[0].tolist() == [f, 45, 50]
     finally:
         for _, v in runs.values():
             v.close()

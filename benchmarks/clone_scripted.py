@@ -33,8 +33,8 @@ set and the fit goes on; the policy kept is the one whose round made the most ma
         [--dagger-epochs 5] [--dagger-lr 3e-4] [--init CLONE]
 
 ``--init CLONE`` starts the fit from an earlier clone's policy; a clone with the ``cell`` point
-head starts one with ``--point-head pixel`` (the run's setting) as exactly itself, its
-within-cell convolution at zero.
+head starts one with ``--point-head pixel`` (the run's setting) as exactly itself: what the
+pixel head adds (the within-cell convolution, the pixels' preferences) starts at zero.
 """
 
 from __future__ import annotations

@@ -217,7 +217,7 @@ class PaperPolicy(MaskableMultiInputActorCriticPolicy):
         self.within = nn.Conv2d(channels, n_pt * c * c, 3, padding=1) if pixel and c > 1 else None
         # Every pixel's learnt preference per function, as the sub-pixel maps are laid out (see
         # PointDistribution.point_logits). Zero: the cell head. Without it free ground ties, and
-        # argmax took the first such pixel, on the screen's top edge, where a depot never fits.
+        # argmax took the first such pixel, on the screen's top edge, as the depot's site.
         self.place = nn.Parameter(torch.zeros(n_pt, c * c, size * size)) if pixel else None
         heads = [(fe, np.sqrt(2)), (self.action_net, 0.01), (self.value_net, 1.0),
                  (self.fine, 0.01), (self.coarse, 0.01), (self.where, 0.01)]

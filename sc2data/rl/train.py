@@ -147,9 +147,10 @@ class RLConfig:
     # observation, independent otherwise.
     point_head: str = "cell"
     """Spatial policy: cell (one logit per observation cell, shared by its pixels) or pixel
-    (and a 3×3 convolution weighing the pixels within each cell: the most likely point is a
-    pixel, not a cell's centre)."""
-    # sc2data.rl.spatial.PaperPolicy; the same at --obs-size 64, where a cell is a pixel.
+    (a logit per screen pixel: a 3×3 convolution weighing the pixels within each cell, and a
+    learnt preference per pixel; argmax clicks a pixel, not a cell's centre)."""
+    # sc2data.rl.spatial.PaperPolicy. Costs 1.9× in decisions/s at --obs-size 32
+    # (BENCHMARKS.md, "A point head that chooses the pixel"), so not the default.
     gamma: float = 0.99
     """PPO discount (per pysc2 step with --smdp)."""
     gae_lambda: float = 0.95

@@ -194,6 +194,7 @@ def test_the_pixel_head_is_the_cell_head_plus_a_choice_within_the_cell(tmp_path:
             dp = pixel.get_distribution(obs)
             dp.function_logits[0, f] = 100.0
         assert dp.get_actions(deterministic=True)[0].tolist() == [f, 45, 50]
+        assert dp.get_actions()[0].tolist() == [f, 45, 50]  # sampled: the same layout read back
     finally:
         for _, v in runs.values():
             v.close()

@@ -158,7 +158,8 @@ def test_the_pixel_head_is_the_cell_head_plus_a_choice_within_the_cell(tmp_path:
         runs[head] = (new_model(cfg, vec, 0).policy, vec)
     cell, pixel = runs["cell"][0], runs["pixel"][0]
     try:
-        assert pixel.within is not None and cell.within is None
+        assert pixel.within is not None and cell.within is None and cell.place is None
+        assert pixel.place is not None and not pixel.place.any()  # the preferences start at 0
         state = {k: v for k, v in pixel.state_dict().items()
                  if not k.startswith(("within.", "place"))}
         cell.load_state_dict(state)

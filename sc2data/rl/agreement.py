@@ -17,7 +17,11 @@ confusions a round of the MEM loop must fix). Stacks on which no rule fires are 
 the share of them the MEM matches to no command is reported too. Recall is also given on the
 stacks where the command's rule is the only one that fired (:func:`recall_alone`): a stack where
 two rules fire (an idle SCV sent to mine as a depot appears) is rare in any pair set, and a MEM
-that matches only one of its two commands loses recall there, not on the events themselves. And
+that matches only one of its two commands loses recall there, not on the events themselves.
+What fired beside each miss is counted (:func:`missed_beside`), beside the distances between the
+command texts (:func:`text_distances`): the MEM's distance is Euclidean, so a stack can be within
+the threshold of two texts only if they are within twice the threshold of each other — a miss
+beside a text farther than that is one the MEM cannot avoid without moving its texts. And
 each command's firings are split, in the JSON (``by_action``), by what the policy chose in the
 step (:func:`by_action`: the pysc2 function, or the macro): a rule reads two frames and cannot
 always tell what the step did (``collect_minerals`` fires when an idle SCV is sent to build as
@@ -325,6 +329,29 @@ def recall_alone(fired: np.ndarray, matched: np.ndarray) -> tuple[np.ndarray, li
     return n, [_ratio(int(h), int(k)) for h, k in zip(hit, n)]
 
 
+def missed_beside(fired: np.ndarray, matched: np.ndarray, ids: list[str]
+                  ) -> dict[str, dict[str, int]]:
+    """Per command, what fired beside it where the MEM missed it: for each other command, the
+    stacks where both rules fired and the MEM did not match this one (a stack may count under
+    several). A stack is within ``threshold`` of two command texts only if the texts are within
+    twice that of each other (the triangle inequality), so a miss beside a far text
+    (:func:`text_distances`) is one no MEM of these embeddings could avoid."""
+    out: dict[str, dict[str, int]] = {}
+    for k, cid in enumerate(ids):
+        missed = fired[:, k] & ~matched[:, k]
+        counts = {other: int((missed & fired[:, j]).sum()) for j, other in enumerate(ids)
+                  if j != k}
+        out[cid] = {c: n for c, n in counts.items() if n}
+    return out
+
+
+def text_distances(embeddings: np.ndarray, ids: list[str]) -> dict[str, dict[str, float]]:
+    """The Euclidean distance between every two commands' text embeddings (``(n, dim)``)."""
+    d = np.linalg.norm(embeddings[:, None, :] - embeddings[None, :, :], axis=-1)
+    return {a: {b: round(float(d[i, j]), 4) for j, b in enumerate(ids) if j != i}
+            for i, a in enumerate(ids)}
+
+
 def by_action(fired: np.ndarray, matched: np.ndarray, actions: np.ndarray
               ) -> dict[str, dict[str, int]]:
     """Where one command's rule fired (``fired``, ``matched``: that command's columns): per
@@ -361,6 +388,7 @@ def _result(judge: _Judge, fired: np.ndarray, matched: np.ndarray, *, epic: floa
                   (fired & ~matched).sum(0))
     none = ~fired.any(1)
     confused = false_matches(fired, matched, judge.ids)
+    beside = missed_beside(fired, matched, judge.ids)
     n_alone, r_alone = recall_alone(fired, matched)
     actions = np.array(seen.actions, dtype=object)
     per = {i: {"text": t, "rule_fired": int(fired[:, k].sum()),
@@ -371,12 +399,14 @@ def _result(judge: _Judge, fired: np.ndarray, matched: np.ndarray, *, epic: floa
                "fired_alone": int(n_alone[k]), "recall_alone": r_alone[k],
                "by_action": by_action(fired[:, k], matched[:, k], actions),
                "pearson": pearson(fired[:, k], matched[:, k]), "false_matches": confused[i],
+               "missed_beside": beside[i],
                "sim": (against_record(fired[:, k], matched[:, k], happened[:, k])
                        if happened is not None and i in EVENT_OF else None)}
            for k, (i, t) in enumerate(zip(judge.ids, judge.texts))}
     return {**head, "stacks": int(len(fired)),
             "marines": seen.marines, "commands": per, "null_stacks": int(none.sum()),
             "null_unmatched": _ratio(int((none & ~matched.any(1)).sum()), int(none.sum())),
+            "text_distances": text_distances(judge.scorer.embed_texts(judge.texts), judge.ids),
             "reward": {"pearson": pearson(fired.sum(1), matched.sum(1)), "epic": epic,
                        "gamma": cfg.gamma, "epic_transitions": len(seen.drawn),
                        "epic_support": len(seen.support)},
@@ -385,9 +415,10 @@ def _result(judge: _Judge, fired: np.ndarray, matched: np.ndarray, *, epic: floa
 
 def summary(result: dict[str, Any]) -> list[str]:
     """A small table: per command, rule firings, MEM matches, precision, recall, F1 and recall
-    where its rule was the only one to fire; what the false matches were; on the simulator, the
-    rule and the MEM against the game's record; then the two rewards' correlation and EPIC
-    distance."""
+    where its rule was the only one to fire; what the false matches were, and what fired beside
+    its misses (marked where the two texts are too far apart for one stack to match both); on
+    the simulator, the rule and the MEM against the game's record; then the two rewards'
+    correlation and EPIC distance."""
     def pct(x: float | None) -> str:
         return "—" if x is None else f"{100 * x:.1f}%"
 
@@ -407,6 +438,15 @@ def summary(result: dict[str, Any]) -> list[str]:
             lines.append(f"{cid} matched where instead: " + ", ".join(
                 f"{other} fired {n:,}" if other != "null" else f"no rule fired {n:,}"
                 for other, n in c["false_matches"].items()))
+    far = result.get("text_distances", {})
+    for cid, c in result["commands"].items():
+        if c.get("missed_beside"):
+            lines.append(f"{cid} missed where also fired: " + ", ".join(
+                f"{other} {n:,}" + (" (texts {:.2f} apart ≥ 2 × threshold: no stack matches "
+                                    "both)".format(far[cid][other])
+                                    if far.get(cid, {}).get(other, 0) >= 2 * result["threshold"]
+                                    else "")
+                for other, n in c["missed_beside"].items()))
     record = {cid: c["sim"] for cid, c in result["commands"].items() if c.get("sim")}
     if record:
         lines.append(f"{'against the game':<20} {'happened':>10} {'rule P':>9} {'rule R':>7} "

@@ -92,6 +92,8 @@ def test_agreement_reports_f1_and_the_rewards_correlation_and_epic(
     assert reward["pearson"] is None or -1.0 <= reward["pearson"] <= 1.0
     for c in result["commands"].values():  # every false match is accounted for
         assert sum(c["false_matches"].values()) >= c["fp"]
+        alone_missed = round(c["fired_alone"] * (1 - (c["recall_alone"] or 0)))
+        assert sum(c["missed_beside"].values()) >= c["fn"] - alone_missed  # misses beside others
         assert c["fired_alone"] <= c["rule_fired"]
         by = c["by_action"]  # every firing under the action chosen in its step
         assert sum(v["fired"] for v in by.values()) == c["rule_fired"]
@@ -102,6 +104,9 @@ def test_agreement_reports_f1_and_the_rewards_correlation_and_epic(
         for key in ("rule_precision", "rule_recall", "mem_precision", "mem_recall"):
             assert sim[key] is None or 0.0 <= sim[key] <= 1.0
     assert "recall, only rule" in text and "against the game" in text
+    far = result["text_distances"]  # every two texts, both ways alike
+    assert set(far) == set(result["commands"])
+    assert all(far[a][b] == far[b][a] > 0 for a in far for b in far[a])
 
 
 def test_false_matches_by_hand() -> None:
@@ -117,6 +122,37 @@ def test_false_matches_by_hand() -> None:
         "barracks": {"depot": 1, "null": 1},
         "marine": {"depot": 1, "barracks": 1},
     }
+
+
+def test_what_fired_beside_a_miss_by_hand() -> None:
+    """Depot and barracks fired together twice (the MEM matched depot once, barracks never),
+    depot alone once (missed), marine with depot once (both matched)."""
+    from sc2data.rl.agreement import missed_beside
+
+    ids = ["depot", "barracks", "marine"]
+    fired = np.array([[1, 1, 0], [1, 1, 0], [1, 0, 0], [1, 0, 1]], bool)
+    matched = np.array([[1, 0, 0], [0, 0, 0], [0, 0, 0], [1, 0, 1]], bool)
+    assert missed_beside(fired, matched, ids) == {
+        "depot": {"barracks": 1}, "barracks": {"depot": 2}, "marine": {}}
+
+
+def test_text_distances_and_the_summary_marks_misses_no_stack_could_avoid() -> None:
+    """Texts 0.6 and 1.2 from "depot": a stack within 0.5 of both "depot" and "marine" would
+    put them within 1.0 of each other, so a depot missed beside a marine is marked."""
+    from sc2data.rl.agreement import summary, text_distances
+
+    ids = ["depot", "barracks", "marine"]
+    d = text_distances(np.array([[0.0, 0.0], [0.6, 0.0], [0.0, 1.2]]), ids)
+    assert d["depot"] == {"barracks": 0.6, "marine": 1.2}
+    assert d["barracks"]["marine"] == pytest.approx(math.hypot(0.6, 1.2), abs=1e-4)
+    blank = {"rule_fired": 0, "mem_matched": 0, "precision": None, "recall": None}
+    result = {"stacks": 4, "episodes": 1, "marines": [0], "threshold": 0.5,
+              "null_stacks": 0, "null_unmatched": None, "text_distances": d,
+              "commands": {"depot": {**blank, "missed_beside": {"barracks": 2, "marine": 1}},
+                           "barracks": blank, "marine": blank}}
+    line = next(x for x in summary(result) if x.startswith("depot missed"))
+    assert line == ("depot missed where also fired: barracks 2, marine 1 (texts 1.20 apart "
+                    "≥ 2 × threshold: no stack matches both)")
 
 
 def test_recall_where_only_its_rule_fired_by_hand() -> None:

@@ -1,0 +1,10 @@
+#!/bin/bash
+# rl agreement on the pixel-head kicked learners: paper MEM (round 0) and the loop's round-2 MEM
+cd ${WT:-/work/main}
+PY="nice -n 15 /work/main/.venv/bin/python -m sc2data.cli"
+K=/work/exp/kickpix
+for job in "$@"; do
+  run=${job%%:*}; mem=${job##*:}
+  name=$K/agree/$run-by-$(basename $(dirname $mem))-$(basename $mem)
+  [ -f $name.json ] || $PY rl agreement $K/$run --mem $mem --episodes 3 --out $name.json --no-progress > $name.txt 2>&1
+done

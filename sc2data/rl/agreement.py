@@ -313,11 +313,17 @@ def false_matches(fired: np.ndarray, matched: np.ndarray, ids: list[str]
     out: dict[str, dict[str, int]] = {}
     for k, cid in enumerate(ids):
         false = matched[:, k] & ~fired[:, k]
-        counts = {other: int((false & fired[:, j]).sum()) for j, other in enumerate(ids)
-                  if j != k}
-        counts["null"] = int((false & none).sum())
-        out[cid] = {c: n for c, n in counts.items() if n}
+        out[cid] = _beside(false, fired, ids, k)
+        if n := int((false & none).sum()):
+            out[cid]["null"] = n
     return out
+
+
+def _beside(rows: np.ndarray, fired: np.ndarray, ids: list[str], k: int) -> dict[str, int]:
+    """Of the stacks ``rows``, how many each command but the ``k``-th had its rule fire on (the
+    commands with none left out)."""
+    counts = {other: int((rows & fired[:, j]).sum()) for j, other in enumerate(ids) if j != k}
+    return {c: n for c, n in counts.items() if n}
 
 
 def recall_alone(fired: np.ndarray, matched: np.ndarray) -> tuple[np.ndarray, list[float | None]]:
@@ -336,18 +342,15 @@ def missed_beside(fired: np.ndarray, matched: np.ndarray, ids: list[str]
     several). A stack is within ``threshold`` of two command texts only if the texts are within
     twice that of each other (the triangle inequality), so a miss beside a far text
     (:func:`text_distances`) is one no MEM of these embeddings could avoid."""
-    out: dict[str, dict[str, int]] = {}
-    for k, cid in enumerate(ids):
-        missed = fired[:, k] & ~matched[:, k]
-        counts = {other: int((missed & fired[:, j]).sum()) for j, other in enumerate(ids)
-                  if j != k}
-        out[cid] = {c: n for c, n in counts.items() if n}
-    return out
+    return {cid: _beside(fired[:, k] & ~matched[:, k], fired, ids, k)
+            for k, cid in enumerate(ids)}
 
 
 def text_distances(embeddings: np.ndarray, ids: list[str]) -> dict[str, dict[str, float]]:
     """The Euclidean distance between every two commands' text embeddings (``(n, dim)``)."""
-    d = np.linalg.norm(embeddings[:, None, :] - embeddings[None, :, :], axis=-1)
+    from sc2data.model.scorer import pairwise
+
+    d = pairwise(embeddings, embeddings)
     return {a: {b: round(float(d[i, j]), 4) for j, b in enumerate(ids) if j != i}
             for i, a in enumerate(ids)}
 
@@ -441,12 +444,13 @@ def summary(result: dict[str, Any]) -> list[str]:
     far = result.get("text_distances", {})
     for cid, c in result["commands"].items():
         if c.get("missed_beside"):
-            lines.append(f"{cid} missed where also fired: " + ", ".join(
-                f"{other} {n:,}" + (" (texts {:.2f} apart ≥ 2 × threshold: no stack matches "
-                                    "both)".format(far[cid][other])
-                                    if far.get(cid, {}).get(other, 0) >= 2 * result["threshold"]
-                                    else "")
-                for other, n in c["missed_beside"].items()))
+            parts = []
+            for other, n in c["missed_beside"].items():
+                d = far.get(cid, {}).get(other, 0.0)
+                parts.append(f"{other} {n:,}" + (
+                    f" (texts {d:.2f} apart ≥ 2 × threshold: no stack matches both)"
+                    if d >= 2 * result["threshold"] else ""))
+            lines.append(f"{cid} missed where also fired: " + ", ".join(parts))
     record = {cid: c["sim"] for cid, c in result["commands"].items() if c.get("sim")}
     if record:
         lines.append(f"{'against the game':<20} {'happened':>10} {'rule P':>9} {'rule R':>7} "

@@ -12,6 +12,14 @@ train`` resumes itself) and skips evaluations already written for the trained st
 Narration runs wait until the MEM run (``--mem``) has finished training. Prints and writes
 ``OUT/summary.md`` (the table of BENCHMARKS.md) and one learning-curve PNG per action space.
 
+An experiment longer than the machine's life (a grid of 1,000,000-decision runs over several
+sittings, each on a fresh machine) keeps every finished run's record (``sc2data rl record``: no
+model, ≈ 20 kB) in ``--records DIR`` (``DIR/<space>/<run>``, e.g. a folder of the repository):
+a run recorded there for the budget and evaluation episodes asked is not trained again, and
+the comparison and curves take the records where the runs are not on this machine. ``rl
+compare`` groups records by their full settings and inputs (the MEM's digest), so a record
+of another MEM or setting is a group apart, not a seed of this one.
+
     python benchmarks/rl_experiment.py --out /tmp/rl-exp --mem RUN \\
         --steps macro=16384 paper=8192 --seeds 0 1 2 --jobs 2 \\
         --eval-episodes macro=5 paper=2
@@ -91,18 +99,41 @@ def one_run(out: Path, space: str, reward: str, seed: int, steps: int, a: argpar
         args += ["--mem", str(a.mem)]
         if narration is not None:
             args += ["--narration", str(narration)]
+    episodes = int(dict(s.split("=", 1) for s in a.eval_episodes)[space])
+    kept = a.records / space / name if a.records is not None else None
+    if kept is not None and recorded(kept, steps, episodes):
+        print(f"recorded: {kept}", flush=True)
+        return
     state = _read(run / "state.json") or {}
     if state.get("timesteps", 0) < steps:
         times["train_s"] = times.get("train_s", 0.0) + sh(args, log)
         times_file.write_text(json.dumps(times))
     trained = (_read(run / "state.json") or {}).get("timesteps")
-    episodes = int(dict(s.split("=", 1) for s in a.eval_episodes)[space])
     done = _read(run / "eval.json")
     if not (done and done.get("trained_timesteps") == trained and done.get("episodes") == episodes
             and "sampled" in done):
         times["eval_s"] = sh(["rl", "evaluate", str(run), "--episodes", str(episodes),
                               "--no-progress"], log)
         times_file.write_text(json.dumps(times))
+    if kept is not None:
+        sh(["rl", "record", str(run), "--out", str(kept)], log)
+
+
+def recorded(kept: Path, steps: int, episodes: int) -> bool:
+    """Whether ``kept`` is a run's record trained for ``steps`` and evaluated on ``episodes``
+    (``rl compare`` checks it by content where it reads it)."""
+    entry = _read(kept / "record.json") or {}
+    done = _read(kept / "eval.json") or {}
+    return entry.get("timesteps", 0) >= steps and done.get("episodes") == episodes and \
+        done.get("trained_timesteps") == entry.get("timesteps")
+
+
+def space_runs(out: Path, records: Path | None, space: str) -> list[str]:
+    """The action space's runs on this machine, and the records of those that are not."""
+    here = {p.name: p for p in (out / space).iterdir() if (p / "config.json").is_file()}
+    kept = {} if records is None or not (records / space).is_dir() else {
+        p.name: p for p in (records / space).iterdir() if (p / "record.json").is_file()}
+    return sorted(str(p) for p in {**kept, **here}.values())
 
 
 def train_args(given: str, jobs: int) -> str:
@@ -133,15 +164,16 @@ def fmt(values: list[float]) -> str:
     return f"{np.mean(values):.1f} ± {np.std(values):.1f}" if values else "—"
 
 
-def summary(out: Path, last: int = 10) -> str:
-    """The results table: per action space and reward, over seeds."""
+def summary(out: Path, last: int = 10, records: Path | None = None) -> str:
+    """The results table: per action space and reward, over seeds (the records of runs not on
+    this machine with them; their training minutes are not kept)."""
     lines = ["| space | reward | runs | decisions | pysc2 steps | training episodes | "
              f"marines, first {last} episodes | marines, last {last} episodes | "
              "evaluate argmax | evaluate sampled | train min / run |",
              "| --- | --- | ---: | ---: | ---: | ---: | --- | --- | --- | --- | ---: |"]
     for space_dir in sorted(p for p in out.iterdir() if p.is_dir()):
         groups: dict[str, list[Path]] = {}
-        for run in sorted(p for p in space_dir.iterdir() if (p / "config.json").is_file()):
+        for run in map(Path, space_runs(out, records, space_dir.name)):
             groups.setdefault(run.name.rsplit("-s", 1)[0].split("-", 1)[1], []).append(run)
         for reward, runs in groups.items():
             first, final, det, sto, mins, steps, env_steps, eps = [], [], [], [], [], [], [], []
@@ -151,7 +183,7 @@ def summary(out: Path, last: int = 10) -> str:
                 first.append(float(np.mean(m[:last]))) if m else None
                 final.append(float(np.mean(m[-last:]))) if m else None
                 eps.append(len(m))
-                st = _read(run / "state.json") or {}
+                st = _read(run / "state.json") or _read(run / "record.json") or {}
                 steps.append(st.get("timesteps", 0))
                 env_steps.append(st.get("env_steps", 0))
                 e = _read(run / "eval.json") or {}
@@ -188,6 +220,9 @@ def main() -> None:
                     "space, reward and seed).")
     ap.add_argument("--paraphrased", type=Path, help="Also one narration run (seed 0) per action "
                     "space with this narration file.")
+    ap.add_argument("--records", type=Path, help="Keep each finished run's record (sc2data rl "
+                    "record) in RECORDS/<space>/<run>; runs recorded there are not trained "
+                    "again, and their records are compared beside this machine's runs.")
     ap.add_argument("--summary", action="store_true", help="Only print the table.")
     a = ap.parse_args()
     out: Path = a.out
@@ -214,7 +249,7 @@ def main() -> None:
         episodes = dict(s.split("=", 1) for s in a.eval_episodes)
         sites = macro_sites(a.train_args)
         for space in budgets:
-            runs = sorted(str(p) for p in (out / space).iterdir() if (p / "config.json").is_file())
+            runs = space_runs(out, a.records, space)
             ref = out / f"baselines-{episodes[space]}" if sites == "random" else \
                 out / f"baselines-{episodes[space]}-{sites}"
             if not (ref / "baselines.json").is_file():
@@ -224,7 +259,7 @@ def main() -> None:
                 str(out / f"curves-{space}.png")], out / "plot.log", check=False)
             sh(["rl", "compare", *runs, "--baselines", str(ref), "--out",
                 str(out / f"{space}-compare")], out / "compare.log", check=False)
-    table = summary(out)
+    table = summary(out, records=a.records)
     print(table)
     (out / "summary.md").write_text(table + "\n")
 

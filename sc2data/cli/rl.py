@@ -126,6 +126,20 @@ def compare_cmd(
         typer.echo(f"wrote {out / 'compare.json'} and {out / 'compare.png'}")
 
 
+@app.command("record")
+def record_cmd(
+    run: Path = typer.Argument(..., help="Run folder of sc2data rl train, evaluated."),
+    out: Path = typer.Option(..., "--out", help="Folder for the record (a new one, or a record "
+                                                "to replace)."),
+) -> None:
+    """Keep a finished run without its model: settings, training curve and evaluation (about
+    20 kB against a 3.4 MB paper-space model), which rl compare and rl plot read as the run."""
+    from sc2data.rl.record import record
+
+    entry = record(run, out)
+    typer.echo(f"recorded {run} ({entry['timesteps']:,} decisions, evaluated) into {out}")
+
+
 @app.command("agreement")
 def agreement_cmd(
     run: Path = typer.Argument(..., help="Run folder of sc2data rl train (the policy)."),

@@ -214,12 +214,13 @@ def _by_game(curve: tuple[np.ndarray, np.ndarray, np.ndarray], games: int
 # -- runs -------------------------------------------------------------------------------------
 
 def load_run(run: Path) -> RunScores:
-    """A run's settings, evaluation and training curve; one-line errors for a folder that is
-    not a trained run or has no current evaluation."""
+    """A run's (or its record's, :mod:`sc2data.rl.record`) settings, evaluation and training
+    curve; one-line errors for a folder that is not a trained run or has no current
+    evaluation."""
     from sc2data.rl.evaluate import read_eval
     from sc2data.rl.train import load_config, read_config, read_curve
 
-    load_config(run)  # a trained run whose settings sc2data can run
+    load_config(run, records=True)  # a trained run (or its record) of settings sc2data runs
     config = read_config(run)
     ev = read_eval(run)
     rows = read_curve(run)

@@ -16,6 +16,11 @@
   PPO's own figures per update (losses, entropy, approximate KL, clip fraction, explained
   variance) beside the game's score, one folder per training session.
 
+A *record* (``sc2data rl record``, :mod:`sc2data.rl.record`) is a finished run without its
+model: ``config.json``, ``curve.csv`` / ``curve.json``, ``eval.json`` and ``record.json`` (the
+model's sha256 and those of the curve and evaluation). ``rl compare`` and ``rl plot`` read it as
+a run; whatever needs the model refuses it in one line (:func:`is_record`).
+
 Every file is checked by content where it is read: a model, curve or state that is not the one
 the last checkpoint recorded is a one-line error, never trained on, evaluated or plotted.
 """
@@ -46,6 +51,7 @@ LOGS = "logs"
 MODEL_PARTIAL = "model.partial.zip"
 CURVE_PARTIAL = "curve.partial.csv"
 STATE_PARTIAL = "state.partial.json"
+RECORD = "record.json"
 
 CURVE_FIELDS: tuple[str, ...] = ("episode", "env", "timesteps", "env_steps", "marines",
                                  "game_return", "return")
@@ -56,7 +62,20 @@ written before the sha256 were recorded lack them and are read without that chec
 
 
 def remedy(run: Path) -> str:
+    if is_record(run):
+        return f"record {run} again from its run (sc2data rl record RUN --out {run})"
     return f"delete {run} and train it again, or pick another --out"
+
+
+def is_record(run: Path) -> bool:
+    """Whether ``run`` is a run's record (no model: compared and plotted, never played)."""
+    return (run / RECORD).is_file()
+
+
+def no_model(run: Path) -> str:
+    """The one line for a command that needs a record's model."""
+    return (f"{run} is a run's record (sc2data rl record): it has no model to play, evaluate or "
+            f"train; use the run it was recorded from ({RECORD}: from_run)")
 
 
 def read_record(path: Path, shape: Shape, run: Path) -> dict[str, Any]:
@@ -105,7 +124,12 @@ def recover(run: Path) -> None:
 
 
 def read_state(run: Path) -> dict[str, Any] | None:
-    """The last checkpoint's record (None before the first), its model and curve checked."""
+    """The last checkpoint's record (None before the first), its model and curve checked; a
+    record's (:func:`is_record`) checked by its ``record.json``."""
+    if is_record(run):
+        from sc2data.rl.record import read_record_state
+
+        return read_record_state(run)
     if not (run / STATE).is_file():
         if (run / MODEL).is_file():
             raise Sc2DataError(f"{run} holds {MODEL} but no {STATE} (what it was trained "
@@ -140,6 +164,8 @@ def load_model(run: Path, env: Any, device: str = "cpu", attach: bool = False) -
 
     from sc2data.rl.pipeline import PipelinedPPO
 
+    if is_record(run):
+        raise Sc2DataError(no_model(run))
     path = run / MODEL
     try:
         model = PipelinedPPO.load(path, env=env if attach else None, device=device)

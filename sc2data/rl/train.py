@@ -505,6 +505,8 @@ def train(cfg: RLConfig) -> Path:
     narration, scorer = check_config(cfg)
     run = Path(cfg.out)
     check_out(run)
+    if runs.is_record(run):
+        raise Sc2DataError(runs.no_model(run))
     if run.exists() and not run.is_dir():
         raise Sc2DataError(f"cannot write {run}: it is a file; choose another --out")
     if run.is_dir() and any(run.iterdir()) and not (run / runs.CONFIG).is_file():
@@ -639,6 +641,8 @@ def _init_digest(cfg: RLConfig, run: Path) -> dict[str, str]:
 
 def _trained_model(source: str, option: str) -> Path:
     """``source``'s checkpoint, or one line if it has none."""
+    if runs.is_record(Path(source)):
+        raise Sc2DataError(f"{option} {runs.no_model(Path(source))}")
     model = Path(source) / runs.MODEL
     if not model.is_file():
         raise Sc2DataError(f"{option} {source} is not a trained sc2data rl run (no model.zip); "
@@ -774,10 +778,14 @@ def summary_line(run: Path, seconds: float | None = None, since: int = 0) -> str
             f"steps, {state['episodes']} episodes{score}{speed}")
 
 
-def load_config(run: Path) -> RLConfig:
+def load_config(run: Path, records: bool = False) -> RLConfig:
     """The settings of a trained run (its ``config.json``), its checkpoint checked by content
-    (every reader of a run's model opens it through here)."""
-    if not (run / runs.CONFIG).is_file() or not (run / runs.MODEL).is_file():
+    (every reader of a run's model opens it through here). ``records``: a run's record (no
+    model, :mod:`sc2data.rl.record`) is read too, else refused in one line."""
+    if runs.is_record(run):
+        if not records:
+            raise Sc2DataError(runs.no_model(run))
+    elif not (run / runs.CONFIG).is_file() or not (run / runs.MODEL).is_file():
         raise Sc2DataError(f"{run} is not a trained sc2data rl run (no config.json and "
                            f"model.zip); train one with sc2data rl train --out {run}")
     runs.read_state(run)  # the model (and curve) must be what the last checkpoint recorded

@@ -1,0 +1,98 @@
+"""``sc2data rl record``: a finished run kept without its model, for comparing and plotting.
+
+A paper-space run's ``model.zip`` is 3.4 MB; what ``rl compare`` and ``rl plot`` read of a run —
+its settings, its training curve and its evaluation — is about 20 kB. An experiment that
+outlives the machine it ran on (ten seeds of 1,000,000 decisions over several sittings) keeps
+each finished run's record beside its figures and compares records and runs alike
+(``benchmarks/rl_experiment.py --records``).
+
+A record folder holds the run's ``config.json`` (settings and the digests of what its reward
+read), ``curve.csv`` / ``curve.json`` and ``eval.json``, and ``record.json``: the run it came
+from, its trained decisions, the sha256 of its model (which checkpoint was evaluated) and of
+the curve and evaluation copied, each checked where a record is read. The folder appears whole
+or not at all; recording again into a record replaces it. What needs the model (``rl train``,
+``evaluate``, ``agreement``, ``fork``, a policy rollout) refuses a record in one line.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+from typing import Any
+
+from sc2data.ground.errors import Sc2DataError
+from sc2data.ground.files import PARTIAL, check_out, publish, sha256_file, write_atomic, writing
+from sc2data.ground.formats import Shape
+from sc2data.ground.provenance import versions
+from sc2data.ground.resume import read_record
+from sc2data.rl.runs import CONFIG, CURVE_CSV, CURVE_JSON, EVAL, RECORD, is_record, remedy
+
+COPIED = (CONFIG, CURVE_CSV, CURVE_JSON, EVAL)
+"""What a record keeps of its run (``curve.json`` where the run has one)."""
+
+RECORD_SHAPE: Shape = {"from_run": str, "timesteps": int, "env_steps": int, "episodes": int,
+                       "model_sha256?": str, "curve_sha256": str, "eval_sha256": str,
+                       "recorded_by": str}
+"""``record.json``; ``model_sha256`` is absent only where the run's checkpoint did not record it."""
+
+
+def record(run: Path, out: Path) -> dict[str, Any]:
+    """Write the record of the trained, evaluated run ``run`` into ``out`` (a new folder, or a
+    record to replace); returns ``record.json``'s content."""
+    from sc2data.rl.evaluate import read_eval
+    from sc2data.rl.runs import read_state
+    from sc2data.rl.train import load_config
+
+    if is_record(run):
+        raise Sc2DataError(f"{run} is a record already; copy the folder to keep another")
+    load_config(run)  # a trained run, its model and curve checked by content
+    read_eval(run)  # evaluated at the decisions it has trained
+    state = read_state(run) or {}
+    check_out(out)
+    if out.exists() and not is_record(out):
+        raise Sc2DataError(f"{out} exists and is not a run's record; pick another --out")
+    if out.resolve() == run.resolve():
+        raise Sc2DataError(f"--out {out} is the run itself; pick another folder")
+    entry: dict[str, Any] = {
+        "from_run": str(run), "timesteps": int(state.get("timesteps", 0)),
+        "env_steps": int(state.get("env_steps", 0)), "episodes": int(state.get("episodes", 0)),
+        "curve_sha256": sha256_file(run / CURVE_CSV), "eval_sha256": sha256_file(run / EVAL),
+        "recorded_by": f"sc2data {versions()['sc2data']}"}
+    if "model_sha256" in state:
+        entry["model_sha256"] = state["model_sha256"]
+    tmp = out.with_name(f".{out.name}{PARTIAL}")
+    old = out.with_name(f".{out.name}.old")
+    for stale in (tmp, old):
+        shutil.rmtree(stale, ignore_errors=True)
+    with writing(str(out), "free some space, then rerun the same command"):
+        tmp.mkdir(parents=True)
+        try:
+            for name in COPIED:
+                if (run / name).is_file():
+                    shutil.copy2(run / name, tmp / name)
+            # the record file last: a folder without it is not a record
+            write_atomic(tmp / RECORD, (json.dumps(entry, indent=1, sort_keys=True) + "\n")
+                         .encode())
+            if out.exists():
+                out.replace(old)
+            publish(tmp, out)
+        except BaseException:
+            if old.exists() and not out.exists():
+                old.replace(out)
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
+        shutil.rmtree(old, ignore_errors=True)
+    return entry
+
+
+def read_record_state(run: Path) -> dict[str, Any]:
+    """A record's ``record.json``, its curve and evaluation checked by content (what
+    :func:`sc2data.rl.runs.read_state` gives for a run)."""
+    entry: dict[str, Any] = read_record(run / RECORD, RECORD_SHAPE, remedy(run))
+    for name, key in ((CURVE_CSV, "curve_sha256"), (EVAL, "eval_sha256")):
+        path = run / name
+        if not path.is_file() or sha256_file(path) != entry[key]:
+            raise Sc2DataError(f"{path} is not the one {RECORD} records (changed or damaged "
+                               f"since it was recorded); {remedy(run)}")
+    return entry

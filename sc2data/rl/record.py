@@ -52,12 +52,9 @@ def record(run: Path, out: Path) -> dict[str, Any]:
     check_out(out)
     if out.exists() and not is_record(out):
         raise Sc2DataError(f"{out} exists and is not a run's record; pick another --out")
-    if out.resolve() == run.resolve():
-        raise Sc2DataError(f"--out {out} is the run itself; pick another folder")
     entry: dict[str, Any] = {
-        "from_run": str(run), "timesteps": int(state.get("timesteps", 0)),
+        "from_run": str(run.resolve()), "timesteps": int(state.get("timesteps", 0)),
         "env_steps": int(state.get("env_steps", 0)), "episodes": int(state.get("episodes", 0)),
-        "curve_sha256": sha256_file(run / CURVE_CSV), "eval_sha256": sha256_file(run / EVAL),
         "recorded_by": f"sc2data {versions()['sc2data']}"}
     if "model_sha256" in state:
         entry["model_sha256"] = state["model_sha256"]
@@ -71,6 +68,14 @@ def record(run: Path, out: Path) -> dict[str, Any]:
             for name in COPIED:
                 if (run / name).is_file():
                     shutil.copy2(run / name, tmp / name)
+            # the digests of what was copied, which must be the checkpoint's: a run trained on
+            # while it was recorded is refused, not recorded half old, half new
+            entry.update(curve_sha256=sha256_file(tmp / CURVE_CSV),
+                         eval_sha256=sha256_file(tmp / EVAL))
+            if entry["curve_sha256"] != state.get("curve_sha256", entry["curve_sha256"]) or \
+                    read_eval_at(tmp) != entry["timesteps"]:
+                raise Sc2DataError(f"{run} changed while it was recorded (trained or evaluated "
+                                   f"again); rerun the same command")
             # the record file last: a folder without it is not a record
             write_atomic(tmp / RECORD, (json.dumps(entry, indent=1, sort_keys=True) + "\n")
                          .encode())
@@ -84,6 +89,14 @@ def record(run: Path, out: Path) -> dict[str, Any]:
             raise
         shutil.rmtree(old, ignore_errors=True)
     return entry
+
+
+def read_eval_at(folder: Path) -> Any:
+    """The decisions ``folder``'s evaluation was made at."""
+    try:
+        return json.loads((folder / EVAL).read_text()).get("trained_timesteps")
+    except (OSError, ValueError, AttributeError):
+        return None
 
 
 def read_record_state(run: Path) -> dict[str, Any]:

@@ -31,6 +31,7 @@ of another MEM or setting is a group apart, not a seed of this one.
 from __future__ import annotations
 
 import argparse
+import csv
 import json
 import platform
 import shlex
@@ -160,6 +161,14 @@ def macro_sites(train_args: str) -> str:
     return "random"
 
 
+def _rows(path: Path) -> list[dict[str, str]]:
+    try:
+        with path.open(newline="") as f:
+            return list(csv.DictReader(f))
+    except (OSError, csv.Error):
+        return []
+
+
 def fmt(values: list[float]) -> str:
     return f"{np.mean(values):.1f} ± {np.std(values):.1f}" if values else "—"
 
@@ -178,8 +187,7 @@ def summary(out: Path, last: int = 10, records: Path | None = None) -> str:
         for reward, runs in groups.items():
             first, final, det, sto, mins, steps, env_steps, eps = [], [], [], [], [], [], [], []
             for run in runs:
-                curve = (_read(run / "curve.json") or {}).get("episodes", [])
-                m = [r["marines"] for r in curve]
+                m = [float(r["marines"]) for r in _rows(run / "curve.csv")]
                 first.append(float(np.mean(m[:last]))) if m else None
                 final.append(float(np.mean(m[-last:]))) if m else None
                 eps.append(len(m))

@@ -7,7 +7,7 @@ each finished run's record beside its figures and compares records and runs alik
 (``benchmarks/rl_experiment.py --records``).
 
 A record folder holds the run's ``config.json`` (settings and the digests of what its reward
-read), ``curve.csv`` / ``curve.json`` and ``eval.json``, and ``record.json``: the run it came
+read), ``curve.csv`` and ``eval.json``, and ``record.json``: the run it came
 from, its trained decisions, the sha256 of its model (which checkpoint was evaluated) and of
 the curve and evaluation copied, each checked where a record is read. The folder appears whole
 or not at all; recording again into a record replaces it. What needs the model (``rl train``,
@@ -26,10 +26,11 @@ from sc2data.ground.files import PARTIAL, check_out, publish, sha256_file, write
 from sc2data.ground.formats import Shape
 from sc2data.ground.provenance import versions
 from sc2data.ground.resume import read_record
-from sc2data.rl.runs import CONFIG, CURVE_CSV, CURVE_JSON, EVAL, RECORD, is_record, remedy
+from sc2data.rl.runs import CONFIG, CURVE_CSV, EVAL, RECORD, is_record, remedy
 
-COPIED = (CONFIG, CURVE_CSV, CURVE_JSON, EVAL)
-"""What a record keeps of its run (``curve.json`` where the run has one)."""
+COPIED = (CONFIG, CURVE_CSV, EVAL)
+"""What a record keeps of its run (not ``curve.json``: derived from ``curve.csv``, four times its
+size)."""
 
 RECORD_SHAPE: Shape = {"from_run": str, "timesteps": int, "env_steps": int, "episodes": int,
                        "model_sha256?": str, "curve_sha256": str, "eval_sha256": str,

@@ -17,7 +17,7 @@
   variance) beside the game's score, one folder per training session.
 
 A *record* (``sc2data rl record``, :mod:`sc2data.rl.record`) is a finished run without its
-model: ``config.json``, ``curve.csv`` / ``curve.json``, ``eval.json`` and ``record.json`` (the
+model: ``config.json``, ``curve.csv``, ``eval.json`` and ``record.json`` (the
 model's sha256 and those of the curve and evaluation). ``rl compare`` and ``rl plot`` read it as
 a run; whatever needs the model refuses it in one line (:func:`is_record`).
 

@@ -23,19 +23,12 @@ from typing import Any
 
 from sc2data.ground.errors import Sc2DataError
 from sc2data.ground.files import PARTIAL, check_out, publish, sha256_file, write_atomic, writing
-from sc2data.ground.formats import Shape
 from sc2data.ground.provenance import versions
-from sc2data.ground.resume import read_record
-from sc2data.rl.runs import CONFIG, CURVE_CSV, EVAL, RECORD, is_record, remedy
+from sc2data.rl.runs import CONFIG, CURVE_CSV, EVAL, RECORD, is_record
 
 COPIED = (CONFIG, CURVE_CSV, EVAL)
 """What a record keeps of its run (not ``curve.json``: derived from ``curve.csv``, four times its
 size)."""
-
-RECORD_SHAPE: Shape = {"from_run": str, "timesteps": int, "env_steps": int, "episodes": int,
-                       "model_sha256?": str, "curve_sha256": str, "eval_sha256": str,
-                       "recorded_by": str}
-"""``record.json``; ``model_sha256`` is absent only where the run's checkpoint did not record it."""
 
 
 def record(run: Path, out: Path) -> dict[str, Any]:
@@ -98,15 +91,3 @@ def read_eval_at(folder: Path) -> Any:
         return json.loads((folder / EVAL).read_text()).get("trained_timesteps")
     except (OSError, ValueError, AttributeError):
         return None
-
-
-def read_record_state(run: Path) -> dict[str, Any]:
-    """A record's ``record.json``, its curve and evaluation checked by content (what
-    :func:`sc2data.rl.runs.read_state` gives for a run)."""
-    entry: dict[str, Any] = read_record(run / RECORD, RECORD_SHAPE, remedy(run))
-    for name, key in ((CURVE_CSV, "curve_sha256"), (EVAL, "eval_sha256")):
-        path = run / name
-        if not path.is_file() or sha256_file(path) != entry[key]:
-            raise Sc2DataError(f"{path} is not the one {RECORD} records (changed or damaged "
-                               f"since it was recorded); {remedy(run)}")
-    return entry

@@ -61,6 +61,12 @@ STATE_SHAPE: Shape = {"timesteps": int, "env_steps": int, "episodes": int, "resu
 written before the sha256 were recorded lack them and are read without that check)."""
 
 
+RECORD_SHAPE: Shape = {"from_run": str, "timesteps": int, "env_steps": int, "episodes": int,
+                       "model_sha256?": str, "curve_sha256": str, "eval_sha256": str,
+                       "recorded_by": str}
+"""``record.json``; ``model_sha256`` is absent only where the run's checkpoint did not record it."""
+
+
 def remedy(run: Path) -> str:
     if is_record(run):
         return f"record {run} again from its run (sc2data rl record RUN --out {run})"
@@ -127,8 +133,6 @@ def read_state(run: Path) -> dict[str, Any] | None:
     """The last checkpoint's record (None before the first), its model and curve checked; a
     record's (:func:`is_record`) checked by its ``record.json``."""
     if is_record(run):
-        from sc2data.rl.record import read_record_state
-
         return read_record_state(run)
     if not (run / STATE).is_file():
         if (run / MODEL).is_file():
@@ -143,6 +147,18 @@ def read_state(run: Path) -> dict[str, Any] | None:
             raise Sc2DataError(f"{path} is not the curve {STATE} records (changed or damaged "
                                f"since training wrote it); {remedy(run)}")
     return state
+
+
+def read_record_state(run: Path) -> dict[str, Any]:
+    """A record's ``record.json``, its curve and evaluation checked by content (what
+    :func:`read_state` gives for a run)."""
+    entry: dict[str, Any] = read_record(run / RECORD, RECORD_SHAPE, run)
+    for name, key in ((CURVE_CSV, "curve_sha256"), (EVAL, "eval_sha256")):
+        path = run / name
+        if not path.is_file() or sha256_file(path) != entry[key]:
+            raise Sc2DataError(f"{path} is not the one {RECORD} records (changed or damaged "
+                               f"since it was recorded); {remedy(run)}")
+    return entry
 
 
 def check_model(run: Path, state: dict[str, Any]) -> None:

@@ -13,13 +13,12 @@ resume's (``seed + 1000·resumes``), never repeating the original's.
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 from typing import Any
 
 from sc2data.ground.errors import Sc2DataError
-from sc2data.ground.files import PARTIAL, publish, sha256_file, write_atomic, writing
-from sc2data.rl.runs import CONFIG, CURVE_CSV, CURVE_JSON, MODEL, STATE
+from sc2data.ground.files import sha256_file, write_atomic
+from sc2data.rl.runs import CONFIG, CURVE_CSV, CURVE_JSON, MODEL, STATE, new_folder
 
 COPIED = (MODEL, STATE, CURVE_CSV, CURVE_JSON)
 
@@ -47,21 +46,9 @@ def fork(run: Path, out: Path, mem: Path) -> dict[str, Any]:
         # the other inputs (a starting policy's, a teacher's digest) stay as the run recorded them
         config["inputs"] = {**config["inputs"],
                             **input_digests(load_narration(cfg.narration), str(mem))}
-    tmp = out.with_name(f".{out.name}{PARTIAL}")
-    shutil.rmtree(tmp, ignore_errors=True)
-    with writing(str(out), "free some space, then rerun the same command"):
-        tmp.mkdir(parents=True)
-        try:
-            for name in COPIED:
-                if (run / name).is_file():
-                    shutil.copy2(run / name, tmp / name)
-            write_atomic(tmp / CONFIG,
-                         (json.dumps(config, indent=1, sort_keys=True) + "\n").encode())
-            record = {"from_run": str(run), "from_mem": cfg.mem, "mem": str(mem),
-                      "checkpoint_sha256": sha256_file(run / MODEL)}
-            write_atomic(tmp / "fork.json", (json.dumps(record, indent=1) + "\n").encode())
-            publish(tmp, out)
-        except BaseException:
-            shutil.rmtree(tmp, ignore_errors=True)
-            raise
+    with new_folder(out, [run / name for name in COPIED]) as tmp:
+        write_atomic(tmp / CONFIG, (json.dumps(config, indent=1, sort_keys=True) + "\n").encode())
+        record = {"from_run": str(run), "from_mem": cfg.mem, "mem": str(mem),
+                  "checkpoint_sha256": sha256_file(run / MODEL)}
+        write_atomic(tmp / "fork.json", (json.dumps(record, indent=1) + "\n").encode())
     return record

@@ -17,14 +17,13 @@ or not at all; recording again into a record replaces it. What needs the model (
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 from typing import Any
 
 from sc2data.ground.errors import Sc2DataError
-from sc2data.ground.files import PARTIAL, check_out, publish, sha256_file, write_atomic, writing
+from sc2data.ground.files import check_out, sha256_file, write_atomic
 from sc2data.ground.provenance import versions
-from sc2data.rl.runs import CONFIG, CURVE_CSV, EVAL, RECORD, is_record
+from sc2data.rl.runs import CONFIG, CURVE_CSV, EVAL, RECORD, is_record, new_folder
 
 COPIED = (CONFIG, CURVE_CSV, EVAL)
 """What a record keeps of its run (not ``curve.json``: derived from ``curve.csv``, four times its
@@ -52,36 +51,17 @@ def record(run: Path, out: Path) -> dict[str, Any]:
         "recorded_by": f"sc2data {versions()['sc2data']}"}
     if "model_sha256" in state:
         entry["model_sha256"] = state["model_sha256"]
-    tmp = out.with_name(f".{out.name}{PARTIAL}")
-    old = out.with_name(f".{out.name}.old")
-    for stale in (tmp, old):
-        shutil.rmtree(stale, ignore_errors=True)
-    with writing(str(out), "free some space, then rerun the same command"):
-        tmp.mkdir(parents=True)
-        try:
-            for name in COPIED:
-                if (run / name).is_file():
-                    shutil.copy2(run / name, tmp / name)
-            # the digests of what was copied, which must be the checkpoint's: a run trained on
-            # while it was recorded is refused, not recorded half old, half new
-            entry.update(curve_sha256=sha256_file(tmp / CURVE_CSV),
-                         eval_sha256=sha256_file(tmp / EVAL))
-            if entry["curve_sha256"] != state.get("curve_sha256", entry["curve_sha256"]) or \
-                    read_eval_at(tmp) != entry["timesteps"]:
-                raise Sc2DataError(f"{run} changed while it was recorded (trained or evaluated "
-                                   f"again); rerun the same command")
-            # the record file last: a folder without it is not a record
-            write_atomic(tmp / RECORD, (json.dumps(entry, indent=1, sort_keys=True) + "\n")
-                         .encode())
-            if out.exists():
-                out.replace(old)
-            publish(tmp, out)
-        except BaseException:
-            if old.exists() and not out.exists():
-                old.replace(out)
-            shutil.rmtree(tmp, ignore_errors=True)
-            raise
-        shutil.rmtree(old, ignore_errors=True)
+    with new_folder(out, [run / name for name in COPIED], replace=True) as tmp:
+        # the digests of what was copied, which must be the checkpoint's: a run trained on
+        # while it was recorded is refused, not recorded half old, half new
+        entry.update(curve_sha256=sha256_file(tmp / CURVE_CSV),
+                     eval_sha256=sha256_file(tmp / EVAL))
+        if entry["curve_sha256"] != state.get("curve_sha256", entry["curve_sha256"]) or \
+                read_eval_at(tmp) != entry["timesteps"]:
+            raise Sc2DataError(f"{run} changed while it was recorded (trained or evaluated "
+                               f"again); rerun the same command")
+        # the record file last: a folder without it is not a record
+        write_atomic(tmp / RECORD, (json.dumps(entry, indent=1, sort_keys=True) + "\n").encode())
     return entry
 
 

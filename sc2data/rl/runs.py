@@ -27,17 +27,19 @@ the last checkpoint recorded is a one-line error, never trained on, evaluated or
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import hashlib
 import io
 import json
-from collections.abc import Sequence
+import shutil
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
 from sc2data.ground import resume
 from sc2data.ground.errors import Sc2DataError
-from sc2data.ground.files import check_out, sha256_file, write_atomic, writing
+from sc2data.ground.files import PARTIAL, check_out, publish, sha256_file, write_atomic, writing
 from sc2data.ground.formats import Shape, loads
 from sc2data.ground.resume import CONFIG, EVAL, STATE
 from sc2data.model.runs import BEST
@@ -240,6 +242,34 @@ def check_file_out(path: Path) -> None:
     check_out(path)
     if path.is_dir():
         raise Sc2DataError(f"cannot write {path}: it is a folder; --out takes a file name")
+
+
+@contextlib.contextmanager
+def new_folder(out: Path, copied: Sequence[Path], replace: bool = False) -> Iterator[Path]:
+    """A folder that appears whole or not at all (``rl fork``, ``rl record``): ``copied``
+    files (those that exist) copied into a hidden staging folder that the block fills further,
+    which then takes ``out``'s name — replacing ``out`` with ``replace``. On any failure the
+    staging folder is removed and ``out`` is as it was; a full disk is one line."""
+    tmp = out.with_name(f".{out.name}{PARTIAL}")
+    old = out.with_name(f".{out.name}.old")
+    for stale in (tmp, old):
+        shutil.rmtree(stale, ignore_errors=True)
+    with writing(str(out), "free some space, then rerun the same command"):
+        tmp.mkdir(parents=True)
+        try:
+            for path in copied:
+                if path.is_file():
+                    shutil.copy2(path, tmp / path.name)
+            yield tmp
+            if replace and out.exists():
+                out.replace(old)
+            publish(tmp, out)
+        except BaseException:
+            if old.exists() and not out.exists():
+                old.replace(out)
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
+        shutil.rmtree(old, ignore_errors=True)
 
 
 def write_file(path: Path, data: bytes) -> None:

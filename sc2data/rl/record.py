@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from sc2data.ground.errors import Sc2DataError
-from sc2data.ground.files import check_out, sha256_file, write_atomic
+from sc2data.ground.files import FolderLock, check_out, sha256_file, write_atomic
 from sc2data.ground.provenance import versions
 from sc2data.rl.runs import CONFIG, CURVE_CSV, EVAL, RECORD, is_record, new_folder
 
@@ -39,29 +39,35 @@ def record(run: Path, out: Path) -> dict[str, Any]:
 
     if is_record(run):
         raise Sc2DataError(f"{run} is a record already; copy the folder to keep another")
-    load_config(run)  # a trained run, its model and curve checked by content
-    read_eval(run)  # evaluated at the decisions it has trained
-    state = read_state(run) or {}
-    check_out(out)
-    if out.exists() and not is_record(out):
-        raise Sc2DataError(f"{out} exists and is not a run's record; pick another --out")
-    entry: dict[str, Any] = {
-        "from_run": str(run.resolve()), "timesteps": int(state.get("timesteps", 0)),
-        "env_steps": int(state.get("env_steps", 0)), "episodes": int(state.get("episodes", 0)),
-        "recorded_by": f"sc2data {versions()['sc2data']}"}
-    if "model_sha256" in state:
-        entry["model_sha256"] = state["model_sha256"]
-    with new_folder(out, [run / name for name in COPIED], replace=True) as tmp:
-        # the digests of what was copied, which must be the checkpoint's: a run trained on
-        # while it was recorded is refused, not recorded half old, half new
-        entry.update(curve_sha256=sha256_file(tmp / CURVE_CSV),
-                     eval_sha256=sha256_file(tmp / EVAL))
-        if entry["curve_sha256"] != state.get("curve_sha256", entry["curve_sha256"]) or \
-                read_eval_at(tmp) != entry["timesteps"]:
-            raise Sc2DataError(f"{run} changed while it was recorded (trained or evaluated "
-                               f"again); rerun the same command")
-        # the record file last: a folder without it is not a record
-        write_atomic(tmp / RECORD, (json.dumps(entry, indent=1, sort_keys=True) + "\n").encode())
+    if not (run / CONFIG).is_file():
+        load_config(run)  # the one line for a folder that is not a trained run
+    with FolderLock(run, "rl record"):  # not trained on while it is copied
+        load_config(run)  # a trained run, its model and curve checked by content
+        read_eval(run)  # evaluated at the decisions it has trained
+        state = read_state(run) or {}
+        check_out(out)
+        if out.exists() and not is_record(out):
+            raise Sc2DataError(f"{out} exists and is not a run's record; pick another --out")
+        entry: dict[str, Any] = {
+            "from_run": str(run.resolve()), "timesteps": int(state.get("timesteps", 0)),
+            "env_steps": int(state.get("env_steps", 0)),
+            "episodes": int(state.get("episodes", 0)),
+            "recorded_by": f"sc2data {versions()['sc2data']}"}
+        if "model_sha256" in state:
+            entry["model_sha256"] = state["model_sha256"]
+        with new_folder(out, [run / name for name in COPIED], replace=True) as tmp:
+            # the digests of what was copied, which must be the checkpoint's: a run evaluated
+            # again while it was copied (rl evaluate takes no lock) is refused, not recorded
+            # half old, half new
+            entry.update(curve_sha256=sha256_file(tmp / CURVE_CSV),
+                         eval_sha256=sha256_file(tmp / EVAL))
+            if entry["curve_sha256"] != state.get("curve_sha256", entry["curve_sha256"]) or \
+                    read_eval_at(tmp) != entry["timesteps"]:
+                raise Sc2DataError(f"{run} changed while it was recorded (trained or evaluated "
+                                   f"again); rerun the same command")
+            # the record file last: a folder without it is not a record
+            write_atomic(tmp / RECORD,
+                         (json.dumps(entry, indent=1, sort_keys=True) + "\n").encode())
     return entry
 
 
